@@ -223,6 +223,7 @@ def occlude_poses(
     method: str = DEFAULT_METHOD,
     cameras: CameraSphere = CameraSphere(),
     provenance: ObjectProvenance = ObjectProvenance(),
+    topped_up: bool = True,
     **method_options,
 ) -> Iterator[PoseResult]:
     """Yield a :class:`PoseResult` for each pose of one object: mask, top-up points and samples.
@@ -253,6 +254,9 @@ def occlude_poses(
     provenance : ObjectProvenance
         The object's ``label``, ``class_name``, ``source`` and ``split``, copied into every cloud
         (:class:`OccludedCloud`).
+    topped_up : bool
+        Top up the poses that see too few dense points (default); ``False`` draws from the
+        visible dense points alone (padding with repeats when they are too few).
     **method_options
         The visibility method's keywords.
 
@@ -304,7 +308,7 @@ def occlude_poses(
             if len(visible_index) == 0 and samples_per_view:
                 log.warning("%s: nothing visible from el=%g az=%g; no sample", provenance.source or "mesh", el, az)
             extra = TopUp()
-            if 0 < len(visible_index) < n_points:
+            if topped_up and 0 < len(visible_index) < n_points:
                 triangles = triangles_of(mesh) if triangles is None else triangles
                 seen_faces = np.unique(dense.face_index[visible_index])
                 on_seen = int(np.count_nonzero(np.isin(dense.face_index, seen_faces)))
@@ -408,13 +412,14 @@ def occlude_object(
 
     :func:`occlude_poses` (same keywords, same samples) without the top-up points: a pose that
     sees fewer than ``n_points`` dense points is topped up with visible points on the faces it
-    sees.
+    sees; with ``samples_per_view=0`` there is nothing to top up, so nothing is.
 
     Raises
     ------
     InvalidInputError, InsufficientMemoryError
         As :func:`occlude_poses`.
     """
+    options.setdefault("topped_up", options.get("samples_per_view", DEFAULT_SAMPLES_PER_VIEW) > 0)
     for result in occlude_poses(mesh, poses, key=key, **options):
         yield result.pose_index, result.visible, result.clouds
 

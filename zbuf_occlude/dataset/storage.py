@@ -477,7 +477,7 @@ class Compact(StorageKind):
 
     def occlude_options(self, samples_per_view: int) -> dict[str, Any]:
         # the masks and the top-up points are all it keeps: the reader draws the samples
-        return {"samples_per_view": 0}
+        return {"samples_per_view": 0, "topped_up": True}
 
     def memory_held(self, size: ObjectSize) -> tuple[int, int]:
         return 0, size.samples_per_view  # it draws no sample: the masks are counted with the dense cloud
