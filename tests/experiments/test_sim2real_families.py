@@ -296,6 +296,6 @@ def test_a_run_at_the_family_heights_sizes_the_families_classes_from_the_first_h
     scans = {Path(s.source).name + s.label: s for s in load_real_scans(real)}
     first = {c: [scans[Path(sets.sources[i]).name + c.title()].points_sensor_m for i in sets.half_a if sets.real_labels[i] == k]
              for k, c in enumerate(sets.names)}  # fmt: skip
-    assert sets.sizes["bush"] == family_heights(first)["bush"] != config.sizes["bush"]  # the scored half is not used
-    assert sets.sizes["car"] == config.sizes["car"]  # no family writes to cars
+    assert sets.sizes(config.sizes)["bush"] == family_heights(first)["bush"] != config.sizes["bush"]  # the scored half is not used
+    assert sets.sizes(config.sizes)["car"] == config.sizes["car"]  # no family writes to cars
     assert {m.class_name for m in sets.meshes} == {"bush", "car"} and sets.families_fit is not None

@@ -13,16 +13,15 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-from zbuf_occlude.sensors.request import LAS_FORMATS
 from zbuf_occlude.cli.options import GIVEN, Checked, real, shown
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors.request import LAS_FORMATS
 from zbuf_occlude.sensors.scan_data import GPS_START_S
 
 __all__ = [
     "LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "check_gps_start_option", "las_keywords",
 ]  # fmt: skip
 
-#: The ``--format`` values that write LAS/LAZ files.
 #: The options of :func:`add_las_arguments`: ``args`` attribute → option.
 LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps-start"}
 

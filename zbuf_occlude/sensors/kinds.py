@@ -21,13 +21,13 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.ray_tables import RAY_TABLE_SUFFIXES
 from zbuf_occlude.sensors.patterns.airborne import AIRBORNE_IDEAL_BEAM, AirborneScanner
 from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS
 from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.checks import MAX_RANGE_M, given, located, mapping, real, text, value_kind
 from zbuf_occlude.sensors.patterns.depth_camera import DEPTH_CAMERA_PRESETS, DepthCamera
 from zbuf_occlude.sensors.patterns.spinning import LIDAR_PRESETS, Lidar
-from zbuf_occlude.io.ray_tables import RAY_TABLE_SUFFIXES
 from zbuf_occlude.sensors.patterns.ray_table import RAY_TABLE_FILE_BEAM, RAY_TABLE_PRESETS, RayTable, load_ray_table
 
 __all__ = [

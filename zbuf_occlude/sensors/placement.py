@@ -243,9 +243,7 @@ class CropDistributions:
 
     def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
         # the one check of every crop setting; messages name the field, or its option in option_names
-        def n(name: str) -> str:
-            return (option_names or {}).get(name, name)
-
+        n = namer(option_names)
         for name, lowest, above in (("distance_m", 0.0, True), ("height_m", 0.0, False), ("size_m", 0.0, True),
                                     ("azimuth_deg", None, False), ("yaw_deg", None, False)):  # fmt: skip
             unit = " metres" if name.endswith("_m") else ""

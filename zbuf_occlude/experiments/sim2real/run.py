@@ -16,7 +16,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -124,9 +124,9 @@ class Sim2RealSets:
         With ``fit_families``: the families fitted to the first half
         (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`), whose objects
         ``meshes`` holds (named ``families/CLASS/FAMILY_K``).
-    sizes : dict of str to SizeRange or None
-        With ``family_heights``: the classes' sizes of every mesh-only set, ``config.sizes`` with the first half's
-        heights (:func:`~zbuf_occlude.experiments.sim2real.families.family_heights`); None: ``config.sizes``.
+    heights : dict of str to SizeRange or None
+        With ``family_heights``: the first half's heights of the classes a family writes to
+        (:func:`~zbuf_occlude.experiments.sim2real.families.family_heights`), which :meth:`sizes` puts over ``config.sizes``.
     """
 
     names: list
@@ -142,7 +142,11 @@ class Sim2RealSets:
     fitted_sizes: dict | None = None
     fit_json: dict | None = None
     families_fit: FamiliesFit | None = None
-    sizes: dict | None = None
+    heights: dict | None = None
+
+    def sizes(self, base: Mapping[str, SizeRange]) -> dict[str, SizeRange]:
+        """The classes' sizes of every mesh-only set: ``base`` (``config.sizes``) with :attr:`heights` over it."""
+        return {**base, **(self.heights or {})}
 
 
 def _kinds(config: Sim2RealConfig) -> tuple[str, ...]:
@@ -253,7 +257,7 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     if config.family_heights:  # the first half's heights, before the meshes are tried at them and the families fitted
         sets = _at_family_heights(config, sets, [scans[kept[i]] for i in half_a])
         meshes = sets.meshes
-    sizes = sets.sizes or config.sizes
+    sizes = sets.sizes(config.sizes)
     if config.fit_families:
         first_half = {c: [scans[kept[i]].points for i in half_a if real_y[i] == k] for k, c in enumerate(names)}
         say(f"fitting the procedural families to the first half's crops: {len(half_a)} scans")
@@ -301,12 +305,13 @@ def _at_family_heights(config: Sim2RealConfig, sets: Sim2RealSets, first_half: l
     """
     labels = sets.real_labels[sets.half_a]
     heights = family_heights({c: [s.points_sensor_m for s, y in zip(first_half, labels) if y == k] for k, c in enumerate(sets.names)})
-    sizes = {**config.sizes, **heights}
-    meshes, skipped = check_lidar_meshes(sets.meshes, config.sensor, sizes, config.n_points, min_returns=int(config.min_returns))
+    sets = replace(sets, heights=heights)
+    meshes, skipped = check_lidar_meshes(sets.meshes, config.sensor, sets.sizes(config.sizes), config.n_points,
+                                         min_returns=int(config.min_returns))  # fmt: skip
     lost = sorted(set(sets.names) - {m.class_name for m in meshes})
     if lost:
         raise InvalidInputError(f"{config.sensor.name} sees no mesh of {', '.join(lost)} at the first half's heights")
-    return replace(sets, meshes=meshes, skipped=sets.skipped + skipped, sizes=sizes)
+    return replace(sets, meshes=meshes, skipped=sets.skipped + skipped)
 
 
 def _fitted_placement(config: Sim2RealConfig, placement: dict[str, dict]) -> dict[str, dict]:
@@ -358,8 +363,8 @@ def _fix_settings(config: Sim2RealConfig, sets: Sim2RealSets, out: OwnedFolder |
                                     "chosen": {c: fit.record["classes"][c]["chosen"] for c in fit.classes},
                                     "meshes_kept": sorted(fit.record["meshes_kept"]),
                                     "objects": fit.counts(config.family_count),
-                                    **({"heights_m": {c: [v.lo_m, v.hi_m] for c, v in sorted(sets.sizes.items())
-                                                      if v != config.sizes.get(c)}} if sets.sizes else {})}  # fmt: skip
+                                    **({"heights_m": {c: [v.lo_m, v.hi_m] for c, v in sorted(sets.heights.items())}}
+                                       if sets.heights is not None else {})}  # fmt: skip
     if config.fit_sensor:  # likewise: runs without it keep their settings
         settings["fit_sensor"] = {
             "split_seed": _REAL_SPLIT_SEED, "fitted_sensor": sets.fit_json, "fitted_shape": list(config.fitted_shape),
@@ -450,7 +455,7 @@ def _build_seed_sets(config: Sim2RealConfig, sets: Sim2RealSets, seed: int, trai
     (no ``"val"`` when they validate on the fit half), with ``progress`` per set on stderr."""
     sc, n_points = config.scale_values, config.n_points
     kinds = _kinds(config)
-    recipe = SetRecipe(sensor=config.sensor, sizes=sets.sizes or config.sizes, keep_scale=config.keep_scale, min_returns=int(config.min_returns),
+    recipe = SetRecipe(sensor=config.sensor, sizes=sets.sizes(config.sizes), keep_scale=config.keep_scale, min_returns=int(config.min_returns),
                        dense_points=sc.dense_points, resolution=sc.resolution, method=config.method,
                        elevation_deg=config.occluded_elevation_deg, footprint=config.footprint_mode)  # fmt: skip
     options = dict(fitted_sensor=sets.fitted, fitted_placement=sets.fitted_placement, fitted_sizes=sets.fitted_sizes,
