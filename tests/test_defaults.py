@@ -10,7 +10,7 @@ from zbuf_occlude import defaults
 from zbuf_occlude.experiments.compare import CompareConfig
 from zbuf_occlude.farm.config import FarmParams
 from zbuf_occlude.geometry.cameras import camera_on_sphere, cameras_from_schedule
-from zbuf_occlude.pipeline import CameraSphere, occlude_point_set, occlude_poses
+from zbuf_occlude.pipeline import CameraSphere, PoseDraws, occlude_point_set, occlude_poses
 from zbuf_occlude.render.moderngl_backend import ModernGLRenderer
 from zbuf_occlude.visibility.peers import naive_zbuffer_visible
 from zbuf_occlude.visibility.registry import visible_mask
@@ -60,8 +60,8 @@ def test_sample_sizes_and_views_of_generate_validate_farm_and_occlude_poses() ->
     gen = parser.parse_args(["generate", "--out", "x"])
     val = parser.parse_args(["validate"])
     farm = FarmParams()
-    assert _default(occlude_poses, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
-    assert (_default(occlude_poses, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
+    assert _default(PoseDraws, "n_points") == GENERATE_DEFAULTS.n_points == farm.n_points == gen.points == defaults.DEFAULT_N_POINTS
+    assert (_default(PoseDraws, "samples_per_view") == GENERATE_DEFAULTS.samples_per_view == farm.samples_per_view
             == gen.samples_per_view == defaults.DEFAULT_SAMPLES_PER_VIEW)  # fmt: skip
     assert GENERATE_DEFAULTS.dense_points == gen.dense_points == val.dense_points == defaults.DEFAULT_DENSE_POINTS
     assert GENERATE_DEFAULTS.resolution == gen.resolution == val.resolution == defaults.DEFAULT_RESOLUTION

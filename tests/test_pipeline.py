@@ -22,7 +22,7 @@ import zbuf_occlude as zo
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.geometry.samples import ObjectProvenance, derive_rng, draw_sample, object_key, pose_samples, sample_rng
-from zbuf_occlude.pipeline import CameraSphere, DenseCloud, dense_cloud, occlude_object, occlude_poses
+from zbuf_occlude.pipeline import CameraSphere, DenseCloud, PoseDraws, dense_cloud, occlude_object, occlude_poses
 
 #: The oracle hides at most this fraction of the points the default ``zbuffer`` method
 #: samples.  Measured on the shipped sofa (20k dense points, 256²): 1 of 1536 sampled
@@ -121,7 +121,7 @@ _BALL_DENSE = dense_cloud(_BALL, object_key("ball"), seed=0, count=4000)
 
 def test_occlude_object_labels_each_sample_with_its_pose_and_object():
     poses = [(10.0, 20.0), (-30.0, 200.0)]
-    out = list(occlude_object(_BALL, poses, key=object_key("ball"), n_points=64, samples_per_view=2, dense=_BALL_DENSE,
+    out = list(occlude_object(_BALL, poses, key=object_key("ball"), draws=PoseDraws(n_points=64, samples_per_view=2), dense=_BALL_DENSE,
                               method="oracle", cameras=CameraSphere(radius=2.5),
                               provenance=ObjectProvenance(label=3, class_name="ball", source="ball.off", split="test")))  # fmt: skip
     assert [pose_index for pose_index, _, _ in out] == [0, 1]
@@ -135,11 +135,17 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
             idx = _dense_indices(_BALL_DENSE, c)
             assert visible[idx].all()
     # one point and no samples are legal counts; a sample larger than the visible set is topped up
-    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, n_points=1, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(
+        _BALL, poses[:1], key=1, draws=PoseDraws(n_points=1, samples_per_view=1), dense=_BALL_DENSE, method="oracle"
+    )
     assert len(clouds) == 1 and len(clouds[0].points) == 1 and not clouds[0].padded
-    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(
+        _BALL, poses[:1], key=1, draws=PoseDraws(samples_per_view=0), dense=_BALL_DENSE, method="oracle"
+    )
     assert clouds == [] and visible.any()
-    ((_, visible, clouds),) = occlude_object(_BALL, poses[:1], key=1, n_points=4000, samples_per_view=1, dense=_BALL_DENSE, method="oracle")
+    ((_, visible, clouds),) = occlude_object(
+        _BALL, poses[:1], key=1, draws=PoseDraws(n_points=4000, samples_per_view=1), dense=_BALL_DENSE, method="oracle"
+    )
     c = clouds[0]
     assert int(visible.sum()) < 4000 <= c.n_visible and c.n_topped_up == c.n_visible - int(visible.sum()) and not c.padded
     assert len(np.unique(c.points, axis=0)) == 4000
@@ -149,7 +155,7 @@ def test_occlude_object_labels_each_sample_with_its_pose_and_object():
 def test_the_camera_distance_sets_the_visible_cap_of_a_sphere(radius):
     # from distance d a sphere of radius r shows the cap cos(theta) > r/d: a fraction
     # (1 - r/d)/2 of its area (icosphere and sampling noise: 0.03)
-    (_, visible, _), = occlude_object(_BALL, [(20.0, 30.0)], key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle",
+    (_, visible, _), = occlude_object(_BALL, [(20.0, 30.0)], key=1, draws=PoseDraws(samples_per_view=0), dense=_BALL_DENSE, method="oracle",
                                       cameras=CameraSphere(radius=radius))  # fmt: skip
     assert abs(visible.mean() - (1 - 0.5 / radius) / 2) < 0.03, visible.mean()
 
@@ -157,7 +163,9 @@ def test_the_camera_distance_sets_the_visible_cap_of_a_sphere(radius):
 def test_the_default_dense_cloud_is_the_seeded_one():
     # without ``dense``, the dense cloud is dense_cloud(mesh, key, seed=seed)
     tetra = trimesh.creation.icosphere(subdivisions=0, radius=0.5)
-    ((_, visible, clouds),) = occlude_object(tetra, [(0.0, 0.0)], key=5, seed=2, n_points=8, samples_per_view=1, method="oracle")
+    ((_, visible, clouds),) = occlude_object(
+        tetra, [(0.0, 0.0)], key=5, draws=PoseDraws(n_points=8, samples_per_view=1), seed=2, method="oracle"
+    )
     dense = dense_cloud(tetra, 5, seed=2)
     assert len(visible) == len(dense.points)
     assert np.array_equal(
@@ -182,8 +190,7 @@ def sofa_dense(small_mesh):
 
 
 def _run(mesh, poses, seed, **kw):
-    kw.setdefault("n_points", 256)
-    kw.setdefault("samples_per_view", 3)
+    kw.setdefault("draws", PoseDraws(n_points=256, samples_per_view=3))
     return list(occlude_object(mesh, poses, key=object_key("sofa"), seed=seed, cameras=CameraSphere(resolution=256), **kw))
 
 
@@ -257,7 +264,7 @@ def test_a_pose_seeing_too_few_dense_points_is_topped_up_with_distinct_points_th
     _, mesh = small_mesh
     dense = dense_cloud(mesh, object_key("sofa"), seed=0, count=300)
     poses = zo.view_schedule("30:45,-40:200")
-    for pose in occlude_poses(mesh, poses, key=object_key("sofa"), seed=0, dense=dense, n_points=256, samples_per_view=2,
+    for pose in occlude_poses(mesh, poses, key=object_key("sofa"), draws=PoseDraws(n_points=256, samples_per_view=2), seed=0, dense=dense,
                               method="oracle"):  # fmt: skip
         visible_index, extra = np.flatnonzero(pose.visible), pose.topped_up
         assert 0 < len(visible_index) < 256 <= pose.n_visible == len(visible_index) + len(extra)
@@ -278,8 +285,9 @@ def test_a_pose_seeing_too_few_dense_points_is_topped_up_with_distinct_points_th
 def test_poses_that_see_enough_dense_points_are_not_touched_by_the_top_up(small_mesh, sofa_dense):
     _, mesh = small_mesh
     poses = zo.view_schedule("30:45,-40:200,85:10")
-    kw = {"key": object_key("sofa"), "seed": 0, "dense": sofa_dense, "n_points": 256, "samples_per_view": 2, "method": "oracle"}
-    for a, b in zip(occlude_poses(mesh, poses, **kw), occlude_poses(mesh, poses, topped_up=False, **kw)):
+    kw = {"key": object_key("sofa"), "seed": 0, "dense": sofa_dense, "method": "oracle"}
+    topped_up, not_topped_up = PoseDraws(256, 2), PoseDraws(256, 2, topped_up=False)
+    for a, b in zip(occlude_poses(mesh, poses, draws=topped_up, **kw), occlude_poses(mesh, poses, draws=not_topped_up, **kw)):
         assert a.visible.sum() >= 256 and len(a.topped_up) == 0 == a.topped_up.candidates
         assert len(a.clouds) == len(b.clouds) == 2
         for x, y in zip(a.clouds, b.clouds):  # the same bytes as without top-up
@@ -290,7 +298,7 @@ def test_poses_that_see_enough_dense_points_are_not_touched_by_the_top_up(small_
 def test_a_pose_topped_up_is_deterministic_and_keyed(small_mesh):
     _, mesh = small_mesh
     dense = dense_cloud(mesh, object_key("sofa"), seed=0, count=300)
-    kw = {"dense": dense, "n_points": 256, "samples_per_view": 1, "method": "oracle"}
+    kw = {"dense": dense, "draws": PoseDraws(n_points=256, samples_per_view=1), "method": "oracle"}
     poses = [(30.0, 45.0), (30.0, 45.0)]
     a, b = list(occlude_poses(mesh, poses, key=1, **kw)), list(occlude_poses(mesh, poses, key=1, **kw))
     assert all(np.array_equal(x.topped_up.points, y.topped_up.points) for x, y in zip(a, b))
@@ -308,8 +316,7 @@ def test_a_tiny_visible_surface_still_pads_and_is_counted():
     with pytest.warns(zo.PaddedSamplesWarning, match=r"^2 of 2 clouds hold repeated points") as caught:
         clouds = zo.occlude(mesh, views="0:0,0:180", n_points=1024, dense_points=4000, method="oracle", name="shingles")
     assert len(caught) == 1
-    for pose, cloud in zip(occlude_poses(mesh, [(0.0, 0.0), (0.0, 180.0)], key=object_key("shingles"), dense=dense,
-                                         n_points=1024, samples_per_view=1, method="oracle"), clouds):  # fmt: skip
+    for pose, cloud in zip(occlude_poses(mesh, [(0.0, 0.0), (0.0, 180.0)], key=object_key("shingles"), draws=PoseDraws(n_points=1024, samples_per_view=1), dense=dense, method="oracle"), clouds):  # fmt: skip
         assert np.array_equal(pose.clouds[0].points, cloud.points)
         # topped up to the bound, still short: every distinct point once, then repeats
         assert 0 < pose.topped_up.candidates <= 8 * 1024 and cloud.n_topped_up == len(pose.topped_up) > 0
@@ -347,9 +354,9 @@ def test_generate_writes_occluded_samples(small_mesh, tmp_path):
 def test_occlude_object_rejects_bad_counts(small_mesh):
     _, mesh = small_mesh
     with pytest.raises(InvalidInputError):
-        next(occlude_object(mesh, [(0.0, 0.0)], key=1, n_points=0))
+        next(occlude_object(mesh, [(0.0, 0.0)], key=1, draws=PoseDraws(n_points=0)))
     with pytest.raises(InvalidInputError):
-        next(occlude_object(mesh, [(0.0, 0.0)], key=1, samples_per_view=-1))
+        next(occlude_object(mesh, [(0.0, 0.0)], key=1, draws=PoseDraws(samples_per_view=-1)))
 
 
 # -- a closed convex mesh: the visible points are those of its front faces -------------------
@@ -397,7 +404,7 @@ def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
     decided = ~grazing & ~_SPHERE_NEAR_EDGE
     for method, allowed in (("oracle", 0), ("zbuffer", MAX_ZBUFFER_OFF_LAW)):
         [(_, visible, clouds)] = occlude_object(
-            _SPHERE, [(el, az)], key=object_key("sphere"), n_points=512, samples_per_view=2, dense=_SPHERE_DENSE,
+            _SPHERE, [(el, az)], key=object_key("sphere"), draws=PoseDraws(n_points=512, samples_per_view=2), dense=_SPHERE_DENSE,
             cameras=CameraSphere(resolution=256), method=method,
         )  # fmt: skip
         assert np.count_nonzero(visible[decided] != front[decided]) <= allowed, method
@@ -451,7 +458,7 @@ def test_the_memory_check_counts_this_objects_job_before_allocating(monkeypatch)
     monkeypatch.setattr(occlude_module, "check_memory", refuse)
     for dense, n_dense in ((_BALL_DENSE, 4000), (None, DEFAULT_DENSE_POINTS)):
         with pytest.raises(InvalidInputError, match="refused"):
-            next(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=33, samples_per_view=4, dense=dense,
+            next(occlude_object(_BALL, [(0.0, 0.0)], key=1, draws=PoseDraws(n_points=33, samples_per_view=4), dense=dense,
                                 cameras=CameraSphere(resolution=96)))  # fmt: skip
         assert checked.pop() == estimate_job_memory(
             points=33, samples_per_view=4, dense_points=n_dense, resolution=96, faces=len(_BALL.faces)
@@ -473,8 +480,14 @@ def test_dense_cloud_is_sampled_with_the_generator_of_seed_key_and_the_dense_str
 
 
 def test_occlude_object_defaults_to_seed_0_and_an_empty_source():
-    a = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle"))
-    b = list(occlude_object(_BALL, [(10.0, 20.0)], key=1, n_points=16, samples_per_view=1, dense=_BALL_DENSE, method="oracle", seed=0))
+    a = list(
+        occlude_object(_BALL, [(10.0, 20.0)], key=1, draws=PoseDraws(n_points=16, samples_per_view=1), dense=_BALL_DENSE, method="oracle")
+    )
+    b = list(
+        occlude_object(
+            _BALL, [(10.0, 20.0)], key=1, draws=PoseDraws(n_points=16, samples_per_view=1), dense=_BALL_DENSE, method="oracle", seed=0
+        )
+    )
     assert np.array_equal(a[0][2][0].points, b[0][2][0].points)
     assert a[0][2][0].provenance == ObjectProvenance() == ObjectProvenance(label=-1, class_name="", source="", split="")
 
@@ -497,7 +510,7 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
 
     monkeypatch.setattr(occlude_module, "visible_mask", spy)
     poses = [(10.0, 20.0), (-5.0, 90.0)]
-    list(occlude_object(_BALL, poses, key=1, samples_per_view=0, dense=_BALL_DENSE, method="oracle", cameras=CameraSphere(3.0, 96),
+    list(occlude_object(_BALL, poses, key=1, draws=PoseDraws(samples_per_view=0), dense=_BALL_DENSE, method="oracle", cameras=CameraSphere(3.0, 96),
                         tolerance=0.5))  # fmt: skip
     assert [(c.elevation_deg, c.azimuth_deg, c.radius, c.resolution) for c, _, _ in calls] == [
         (10.0, 20.0, 3.0, (96, 96)),
@@ -525,7 +538,7 @@ def test_occlude_object_passes_its_camera_and_options_to_the_method(monkeypatch)
     monkeypatch.setattr(
         occlude_module, "method_info", lambda name: type(info)(**{**vars(info), "session": Scene}) if name == "zbuffer" else info
     )
-    list(occlude_object(_BALL, poses, key=1, samples_per_view=1, dense=_BALL_DENSE, method="zbuffer", cameras=CameraSphere(resolution=96),
+    list(occlude_object(_BALL, poses, key=1, draws=PoseDraws(samples_per_view=1), dense=_BALL_DENSE, method="zbuffer", cameras=CameraSphere(resolution=96),
                         neighborhood=2))  # fmt: skip
     assert events == [
         ("built", 4000, True),
@@ -543,7 +556,11 @@ def test_a_pose_with_nothing_visible_warns_once_only_if_samples_were_asked(caplo
     for dense, samples, warns in cases:
         caplog.clear()
         with caplog.at_level("WARNING", logger="zbuf_occlude.pipeline"):
-            list(occlude_object(_BALL, [(0.0, 0.0)], key=1, n_points=4, samples_per_view=samples, dense=dense, method="oracle"))
+            list(
+                occlude_object(
+                    _BALL, [(0.0, 0.0)], key=1, draws=PoseDraws(n_points=4, samples_per_view=samples), dense=dense, method="oracle"
+                )
+            )
         assert any("nothing visible" in r.getMessage() for r in caplog.records) == warns, (len(dense.points), samples)
 
 

@@ -22,7 +22,7 @@ import logging
 import os
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -61,7 +61,7 @@ if TYPE_CHECKING:  # trimesh (and scipy) is imported by occlude(), which takes f
     import trimesh
 
 __all__ = [
-    "DenseCloud", "dense_cloud", "CameraSphere", "PoseResult", "occlude_poses", "occlude_object", "occlude", "occlude_point_set",
+    "DenseCloud", "dense_cloud", "CameraSphere", "PoseDraws", "PoseResult", "occlude_poses", "occlude_object", "occlude", "occlude_point_set",
     "NO_FACE", "POINT_SET_METHOD",
 ]  # fmt: skip
 
@@ -140,6 +140,35 @@ class CameraSphere:
             return camera_on_sphere(elevation_deg, azimuth_deg, self.radius, resolution=self.resolution)
 
 
+@dataclass(frozen=True)
+class PoseDraws:
+    """What each pose of an object draws: ``samples_per_view`` samples of ``n_points`` points from the dense points it
+    sees, topped up where they are too few (:func:`occlude_poses`).
+
+    Attributes
+    ----------
+    n_points : int
+        Points per sample, at least 1.
+    samples_per_view : int
+        Samples drawn per pose, at least 0.
+    topped_up : bool
+        Top up the poses that see too few dense points (default; :func:`~zbuf_occlude.geometry.samples.top_up`);
+        ``False`` draws from the visible dense points alone (padding with repeats when they are too few).
+
+    Raises
+    ------
+    InvalidInputError
+        ``n_points < 1`` or ``samples_per_view < 0``.
+    """
+
+    n_points: int = DEFAULT_N_POINTS
+    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW
+    topped_up: bool = True
+
+    def __post_init__(self) -> None:
+        _check_counts(self.n_points, self.samples_per_view)
+
+
 @functools.lru_cache(maxsize=4096)
 def _sphere_camera(elevation_deg: float, azimuth_deg: float, radius: float, resolution: int | tuple[int, int]) -> Camera:
     """:func:`camera_on_sphere`, made once per process for each pose: every object of a farm
@@ -216,19 +245,17 @@ def occlude_poses(
     poses: Sequence[tuple[float, float]],
     *,
     key: int,
-    n_points: int = DEFAULT_N_POINTS,
-    samples_per_view: int = DEFAULT_SAMPLES_PER_VIEW,
+    draws: PoseDraws = PoseDraws(),
     seed: int = DEFAULT_SEED,
     dense: DenseCloud | None = None,
     method: str = DEFAULT_METHOD,
     cameras: CameraSphere = CameraSphere(),
     provenance: ObjectProvenance = ObjectProvenance(),
-    topped_up: bool = True,
     **method_options,
 ) -> Iterator[PoseResult]:
     """Yield a :class:`PoseResult` for each pose of one object: mask, top-up points and samples.
 
-    A pose that sees ``0 < V < n_points`` dense points is topped up: candidates drawn on the
+    A pose that sees ``0 < V < n_points`` dense points (``draws.n_points``) is topped up: candidates drawn on the
     faces holding its visible dense points are tested with ``method`` from the same camera, in
     a session of their own (:func:`~zbuf_occlude.geometry.samples.top_up`, seeded by ``(seed,
     key, TOPUP_STREAM, pose_index, round)``), and the visible ones join the pose's pool.  Poses
@@ -243,8 +270,8 @@ def occlude_poses(
     poses : sequence of (elevation_deg, azimuth_deg)
     key : int
         The object's seed key (:func:`object_key` of a stable name).
-    n_points, samples_per_view : int
-        Points per sample and samples drawn per pose.
+    draws : PoseDraws
+        Points per sample, samples drawn per pose, and whether a pose that sees too few dense points is topped up.
     dense : DenseCloud, optional
         Default: :func:`dense_cloud` ``(mesh, key, seed=seed)``.
     method : str
@@ -254,23 +281,18 @@ def occlude_poses(
     provenance : ObjectProvenance
         The object's ``label``, ``class_name``, ``source`` and ``split``, copied into every cloud
         (:class:`OccludedCloud`).
-    topped_up : bool
-        Top up the poses that see too few dense points (default); ``False`` draws from the
-        visible dense points alone (padding with repeats when they are too few).
     **method_options
         The visibility method's keywords.
 
     Raises
     ------
-    InvalidInputError
-        ``n_points < 1`` or ``samples_per_view < 0``.
     InsufficientMemoryError
         (an InvalidInputError) The object's job would not fit in the memory available
         (:func:`zbuf_occlude.resources.check_memory`), checked before any allocation.
     CameraError
         A pose or ``cameras`` gives no valid camera (:meth:`CameraSphere.camera`).
     """
-    _check_counts(n_points, samples_per_view)
+    n_points, samples_per_view = draws.n_points, draws.samples_per_view
     check_keywords(method, method_options)  # a misspelt option must not run with the default
     # Refuse before allocating what cannot fit (the OOM killer gives no message).
     check_memory(
@@ -308,7 +330,7 @@ def occlude_poses(
             if len(visible_index) == 0 and samples_per_view:
                 log.warning("%s: nothing visible from el=%g az=%g; no sample", provenance.source or "mesh", el, az)
             extra = TopUp()
-            if topped_up and 0 < len(visible_index) < n_points:
+            if draws.topped_up and 0 < len(visible_index) < n_points:
                 triangles = triangles_of(mesh) if triangles is None else triangles
                 seen_faces = np.unique(dense.face_index[visible_index])
                 on_seen = int(np.count_nonzero(np.isin(dense.face_index, seen_faces)))
@@ -412,15 +434,17 @@ def occlude_object(
 
     :func:`occlude_poses` (same keywords, same samples) without the top-up points: a pose that
     sees fewer than ``n_points`` dense points is topped up with visible points on the faces it
-    sees; with ``samples_per_view=0`` there is nothing to top up, so nothing is.
+    sees; with ``samples_per_view=0`` no sample draws from them, so nothing is topped up.
 
     Raises
     ------
     InvalidInputError, InsufficientMemoryError
         As :func:`occlude_poses`.
     """
-    options.setdefault("topped_up", options.get("samples_per_view", DEFAULT_SAMPLES_PER_VIEW) > 0)
-    for result in occlude_poses(mesh, poses, key=key, **options):
+    draws = options.pop("draws", PoseDraws())
+    if draws.samples_per_view == 0:  # the masks alone: no sample would draw from the top-up points
+        draws = replace(draws, topped_up=False)
+    for result in occlude_poses(mesh, poses, key=key, draws=draws, **options):
         yield result.pose_index, result.visible, result.clouds
 
 
@@ -540,8 +564,7 @@ def occlude(
             mesh,
             poses,
             key=key,
-            n_points=n_points,
-            samples_per_view=samples_per_view,
+            draws=PoseDraws(n_points, samples_per_view),
             seed=seed,
             dense=dense,
             method=method,

@@ -772,21 +772,21 @@ def test_occlude_object_refuses_a_job_that_cannot_fit_before_allocating(monkeypa
 
     from zbuf_occlude import resources
     from zbuf_occlude.errors import InsufficientMemoryError
-    from zbuf_occlude.pipeline import CameraSphere, occlude_object
+    from zbuf_occlude.pipeline import CameraSphere, PoseDraws, occlude_object
 
     monkeypatch.setattr(resources, "available_memory", lambda: (8 * 2**30, "test budget"))
     mesh = load_mesh(CHAIR)
     tracemalloc.start()
     try:
         with pytest.raises(InsufficientMemoryError, match=r"^--points needs about .*--points 1,000,000,000.*8 GiB available"):
-            next(occlude_object(mesh, [(30.0, 45.0)], key=1, n_points=10**9, samples_per_view=10))
+            next(occlude_object(mesh, [(30.0, 45.0)], key=1, draws=PoseDraws(n_points=10**9, samples_per_view=10)))
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
     assert peak < 2**20
     with pytest.raises(InsufficientMemoryError, match=r"--resolution"):
         big = CameraSphere(resolution=(40_000, 40_000))
-        next(occlude_object(mesh, [(30.0, 45.0)], key=1, n_points=16, samples_per_view=1, cameras=big))
+        next(occlude_object(mesh, [(30.0, 45.0)], key=1, draws=PoseDraws(n_points=16, samples_per_view=1), cameras=big))
 
 
 # -- the command line, end to end: checks before any mesh, skipped inputs (defects 4, 6, 7, 11, 12) --

@@ -80,8 +80,9 @@ def test_occluded_points_clouds_are_subsets_of_the_occluded_sets_dense_samples_s
     # the same meshes, poses and counts, in the same order; only the visibility differs
     assert [(id(c["mesh"]), c["pose"]) for c in calls] == [(id(c["mesh"]), c["pose"]) for c in mesh_calls]
     assert np.array_equal(point_set.labels, mesh_set.labels) and np.array_equal(point_set.object_index, mesh_set.object_index)
-    assert {c["options"]["method"] for c in calls} == {"point-splat"} and {c["options"]["topped_up"] for c in calls} == {False}
+    assert {c["options"]["method"] for c in calls} == {"point-splat"} and {c["options"]["draws"].topped_up for c in calls} == {False}
     assert {c["options"]["method"] for c in mesh_calls} == {RECIPE.method}
+    assert {c["options"]["draws"].topped_up for c in mesh_calls} == {True}
     assert np.array_equal(point_set.points, np.stack([c["clouds"][0].points for c in calls if c["clouds"]]))
     by_mesh = {id(m.mesh): m for m in meshes}
     for points_call, mesh_call in zip(calls, mesh_calls):

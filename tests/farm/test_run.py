@@ -35,7 +35,7 @@ from zbuf_occlude.geometry.cameras import camera_on_sphere
 from zbuf_occlude.geometry.samples import ObjectProvenance, object_key, pose_samples
 from zbuf_occlude.mesh.inputs.plan import FarmObject, discover_objects
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.pipeline import CameraSphere, dense_cloud, occlude_poses
+from zbuf_occlude.pipeline import CameraSphere, PoseDraws, dense_cloud, occlude_poses
 from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.visibility.registry import method_info, visible_mask
 
@@ -642,7 +642,7 @@ def test_worker_compact_shard_holds_the_dense_cloud_bits_and_poses(tmp_path):
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
     assert attrs == {**_shard_attrs(obj, params), "n_dense": 1000}
     # the top-up points of each pose, pose after pose, as float32: those occlude_poses draws
-    poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
+    poses = list(occlude_poses(mesh, params.poses, key=obj.key, draws=PoseDraws(n_points=150, samples_per_view=0), seed=5, dense=dense,
                                method="oracle", cameras=CameraSphere(resolution=32)))  # fmt: skip
     expected = np.concatenate([p.topped_up.points for p in poses]).astype(np.float32)
     assert topup.dtype == np.float32 and len(topup) == sum(rec["n_topped_up"]) and np.array_equal(topup, expected)
@@ -669,7 +669,7 @@ def test_worker_dense_shard_holds_each_poses_samples(tmp_path):
         assert len(np.unique(row, axis=0)) == 150
     assert {k: attrs[k] for k in _shard_attrs(obj, params)} == _shard_attrs(obj, params)
     # exactly the draws of (seed, key, pose, sample) from the pose's visible and top-up points
-    poses = list(occlude_poses(mesh, params.poses, key=obj.key, n_points=150, samples_per_view=0, seed=5, dense=dense,
+    poses = list(occlude_poses(mesh, params.poses, key=obj.key, draws=PoseDraws(n_points=150, samples_per_view=0), seed=5, dense=dense,
                                method="oracle", cameras=CameraSphere(resolution=32)))  # fmt: skip
     for pose in (0, 1):
         extra = poses[pose].topped_up

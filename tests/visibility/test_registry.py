@@ -13,7 +13,7 @@ import zbuf_occlude
 from zbuf_occlude.errors import InvalidInputError, RegistryError, ZbufOccludeError
 from zbuf_occlude.experiments.compare.run import _sweep_jobs
 from zbuf_occlude.geometry.samples import object_key
-from zbuf_occlude.pipeline import occlude_object
+from zbuf_occlude.pipeline import PoseDraws, occlude_object
 from zbuf_occlude.visibility import registry
 from zbuf_occlude.visibility.registry import available_methods, method_info, register
 
@@ -75,7 +75,7 @@ def test_a_new_method_is_one_function_and_one_register(scratch_registry: None) -
     register("x-resident", takes_resolution=True, session=CountingSession)(_everything_visible)
     mesh = trimesh.creation.box()
     poses = [(0.0, 0.0), (30.0, 90.0), (-45.0, 200.0)]
-    out = list(occlude_object(mesh, poses, key=object_key("box"), n_points=8, samples_per_view=1, method="x-resident"))
+    out = list(occlude_object(mesh, poses, key=object_key("box"), draws=PoseDraws(n_points=8, samples_per_view=1), method="x-resident"))
     assert len(out) == 3 and all(v.all() for _, v, _ in out)
     assert len(sessions) == 1  # points uploaded once for all poses
     jobs = _sweep_jobs(["x-resident", "oracle"], [64, 128], [8])
@@ -149,7 +149,7 @@ def test_occlude_object_refuses_a_misspelt_method_option():
     mesh = trimesh.creation.icosphere(subdivisions=1)
     for method in ("oracle", "embree-fast"):  # the one-shot path and the session path
         with pytest.raises(TypeError, match="tolerence"):
-            list(occlude_object(mesh, [(0.0, 0.0)], key=1, n_points=16, samples_per_view=1, method=method, tolerence=0.1))
+            list(occlude_object(mesh, [(0.0, 0.0)], key=1, draws=PoseDraws(n_points=16, samples_per_view=1), method=method, tolerence=0.1))
 
 
 def test_a_users_method_with_var_keywords_receives_every_option(monkeypatch):

@@ -300,7 +300,8 @@ class StorageKind:
         """
 
     def occlude_options(self, samples_per_view: int) -> dict[str, Any]:
-        """The keywords of :func:`~zbuf_occlude.pipeline.occlude_poses` whose poses :meth:`write_poses` packs."""
+        """``samples_per_view`` and ``topped_up`` of the :class:`~zbuf_occlude.pipeline.PoseDraws` whose poses
+        :meth:`write_poses` packs (:func:`~zbuf_occlude.pipeline.occlude_poses`)."""
         return {"samples_per_view": int(samples_per_view)}
 
     def write_poses(self, target: ShardTarget, poses: Iterable[PoseResult]) -> list[str]:

@@ -26,7 +26,7 @@ from zbuf_occlude.geometry.samples import ObjectProvenance
 from zbuf_occlude.io.atomic import file_sha256, write_text
 from zbuf_occlude.mesh.inputs.kinds import MESH, POINT_SET
 from zbuf_occlude.mesh.inputs.plan import FarmObject
-from zbuf_occlude.pipeline import POINT_SET_METHOD, CameraSphere, PoseResult, dense_cloud, occlude_point_set, occlude_poses
+from zbuf_occlude.pipeline import POINT_SET_METHOD, CameraSphere, PoseDraws, PoseResult, dense_cloud, occlude_point_set, occlude_poses
 
 log = logging.getLogger(__name__)
 
@@ -121,9 +121,9 @@ def _occlude_mesh(obj: FarmObject, params: FarmParams, out: Path, kind: StorageK
     mesh = obj.kind.read(mesh_path, obj.cloud, up=params.up)
     dense = dense_cloud(mesh, obj.key, seed=params.seed, count=params.dense_points, density=params.density)
     results = occlude_poses(
-        mesh, params.poses, key=obj.key, n_points=params.n_points, seed=params.seed, dense=dense, method=params.method,
-        cameras=CameraSphere(params.radius, params.resolution), provenance=_provenance(obj),
-        **kind.occlude_options(params.samples_per_view),
+        mesh, params.poses, key=obj.key, draws=PoseDraws(params.n_points, **kind.occlude_options(params.samples_per_view)),
+        seed=params.seed, dense=dense, method=params.method, cameras=CameraSphere(params.radius, params.resolution),
+        provenance=_provenance(obj),
     )  # fmt: skip
     return {**_write_poses(obj, params, out, kind, dense.points, results), **_mesh_record(mesh)}
 

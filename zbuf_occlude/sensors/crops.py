@@ -27,7 +27,7 @@ from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.patterns.spinning import Lidar
 from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
 from zbuf_occlude.sensors.patterns.ray_table import RayTable
-from zbuf_occlude.sensors.scan import scan
+from zbuf_occlude.sensors.scan import scan, scanned_by
 from zbuf_occlude.sensors.scan_data import Scan
 from zbuf_occlude.sensors.scene.objects import ScanScene, SceneObject, sensor_pose
 
@@ -119,7 +119,7 @@ def object_crop(
     width_scale, profile = placement.stretch, placement.width_profile
     # the largest side after the stretch, at most
     reach = placement.size_m * max(1.0, width_scale) * (1.0 if profile is None else max(1.0, *profile))
-    kind = kind_of(sensor)
+    kind, seed = scanned_by(sensor, seed)
     if kind.flies:
         if placement.visible_share < 1.0:
             raise InvalidInputError(

@@ -21,7 +21,7 @@ from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
 from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
 from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS, number_returns
-from zbuf_occlude.sensors.kinds import kind_of
+from zbuf_occlude.sensors.kinds import SensorKind, kind_of
 from zbuf_occlude.sensors.platform import Trajectory, as_pose
 from zbuf_occlude.sensors.pulses import Pulses
 from zbuf_occlude.sensors.raycast.embree import BACKENDS, cast_embree, face_normals
@@ -33,7 +33,7 @@ from zbuf_occlude.sensors.scene.objects import BuiltScene, ScanScene, SceneObjec
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
-__all__ = ["scan", "scan_airborne", "fire_pulses", "build_scene", "return_numbers"]
+__all__ = ["scan", "scan_airborne", "scanned_by", "fire_pulses", "build_scene", "return_numbers"]
 
 
 def _built(scene) -> BuiltScene:
@@ -97,14 +97,27 @@ def _facing_normals(built: BuiltScene, face, d_world):
     return normal, cos_in, incidence
 
 
-def _checked_arguments(seed, backend: str, frame: str):
-    """:func:`scan`'s seed (:func:`~zbuf_occlude.geometry.sampling.check_seed`), backend and frame, checked before any
-    work: numpy's own refusals of a seed of -1, 'a' or 1.5 came after the rays were cast, and named no argument."""
+def scanned_by(sensor, seed) -> tuple[SensorKind, int]:
+    """The kind of ``sensor`` (:func:`~zbuf_occlude.sensors.kinds.kind_of`) and ``seed`` checked
+    (:func:`~zbuf_occlude.geometry.sampling.check_seed`): what every scan checks before any work
+    (:func:`scan`, :func:`scan_airborne`, :func:`~zbuf_occlude.sensors.crops.object_crop`).  numpy's own
+    refusals of a seed of -1, 'a' or 1.5 came after the rays were cast, and named no argument.
+
+    Raises
+    ------
+    InvalidInputError
+        Not a sensor of any kind; a seed ``check_seed`` refuses.
+    """
+    return kind_of(sensor), check_seed(seed)
+
+
+def _checked_arguments(sensor, seed, backend: str, frame: str) -> tuple[SensorKind, int]:
+    """:func:`scan`'s sensor and seed (:func:`scanned_by`), backend and frame, checked before any work."""
     if backend not in BACKENDS:
         raise InvalidInputError(f"unknown scan backend {backend!r}; use one of {BACKENDS}")
     if frame not in FRAMES:
         raise InvalidInputError(f"unknown frame {frame!r}; use one of {FRAMES}")
-    return check_seed(seed)
+    return scanned_by(sensor, seed)
 
 
 def _platform(pose, scene):
@@ -205,8 +218,7 @@ def scan(
     BackendUnavailable
         Embree or OpenGL missing for the chosen backend.
     """
-    seed = _checked_arguments(seed, backend, frame)
-    kind = kind_of(sensor)
+    kind, seed = _checked_arguments(sensor, seed, backend, frame)
     built = _built(scene)
     platform = _platform(pose, scene)
     if not kind.pulsed:
@@ -280,8 +292,8 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         :meth:`~zbuf_occlude.sensors.patterns.airborne.AirborneScanner.pulses` refuses; a reflectivity or
         transmittance out of range, or a transmittance above 0 without the multi-return model.
     """
-    seed = check_seed(seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
-    if not kind_of(scanner).flies:
+    kind, seed = scanned_by(scanner, seed)  # before the scene is built: numpy would refuse -1 or 'a' only when drawing
+    if not kind.flies:
         raise InvalidInputError(f"scan_airborne flies an airborne scanner, got {type(scanner).__name__}")
     built = _built(scene)
     auto = [isinstance(v, str) and v == AUTO_OPTICS for v in (reflectivity, transmittance)]

@@ -247,15 +247,15 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     """``k`` occluded clouds of one mesh; ``from_points``: visibility from the dense points alone
     (:data:`POINT_VISIBILITY`, no top-up from the mesh's faces), the same poses and draws otherwise."""
     from zbuf_occlude.geometry.samples import object_key
-    from zbuf_occlude.pipeline import CameraSphere, dense_cloud, occlude_object
+    from zbuf_occlude.pipeline import CameraSphere, PoseDraws, dense_cloud, occlude_object
 
     key = object_key(entry.name)
     poses = list(zip(rng.uniform(*recipe.elevation_deg, 2 * k + 2), rng.uniform(0.0, 360.0, 2 * k + 2)))
     dense = dense_cloud(entry.mesh, key, seed=seed, count=recipe.dense_points)
-    how = {"method": POINT_VISIBILITY, "topped_up": False} if from_points else {"method": recipe.method}
+    method, draws = (POINT_VISIBILITY, PoseDraws(n_points, 1, topped_up=False)) if from_points else (recipe.method, PoseDraws(n_points, 1))
     out = []
-    for pose_index, _, clouds in occlude_object(entry.mesh, poses, key=key, n_points=n_points, samples_per_view=1, seed=seed,
-                                                dense=dense, cameras=CameraSphere(resolution=recipe.resolution), **how):  # fmt: skip
+    for pose_index, _, clouds in occlude_object(entry.mesh, poses, key=key, draws=draws, seed=seed, dense=dense, method=method,
+                                                cameras=CameraSphere(resolution=recipe.resolution)):  # fmt: skip
         if clouds:
             out.append(clouds[0].points.astype(np.float64))
             if from_points and clouds[0].n_visible < n_points:
