@@ -66,7 +66,13 @@ def _sensor_name(args: argparse.Namespace) -> str:
 def _placement(args: argparse.Namespace) -> ObjectPlacement:
     """How ``scan`` stands a mesh on the ground: the crop options, ``--azimuth``, ``--yaw``, ``--extents``, ``--size-of``,
     ``--up``, ``--across-sight-width``, ``--outline`` and ``--occlude``, as the library's
-    :class:`~zbuf_occlude.sensors.placement.ObjectPlacement` (which checks them, naming the options as typed)."""
+    :class:`~zbuf_occlude.sensors.placement.ObjectPlacement` (which checks them, naming the options as typed).  The
+    options that shape the object's crop alone are refused without ``--crop``."""
+    if not args.crop:
+        for flag, option in given_crop_options(args, in_crop=True):
+            raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
+        if args.outline is not None:
+            raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
     extents, round_xy = None, False
     if args.extents:
         parts = args.extents.split(",")
@@ -83,15 +89,11 @@ def _placement(args: argparse.Namespace) -> ObjectPlacement:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    if not args.crop:
-        for flag, option in given_crop_options(args, in_crop=True):
-            raise InvalidInputError(f"{flag} {option.in_crop}: it needs --crop")
-        if args.outline is not None:
-            raise InvalidInputError("--outline gives the object's crops the outline of real scans: it needs --crop")
-    formats = ("npz", "ply") if args.format == "both" else (args.format,)
-    request = scan_request(args, _sensor_name(args), backend=args.backend, frame=args.frame, trajectory=args.trajectory,
-                           samples=args.samples, formats=formats, las=las_keywords(args, formats))  # fmt: skip
+    sensor = _sensor_name(args)
     placement = _placement(args)
+    formats = ("npz", "ply") if args.format == "both" else (args.format,)
+    request = scan_request(args, sensor, backend=args.backend, frame=args.frame, trajectory=args.trajectory, samples=args.samples,
+                           formats=formats, las=las_keywords(args, formats))  # fmt: skip
     written, empty, folder = 0, 0, None  # a refused run's empty --out is removed by cli.main
     for done in run_scan(request, args.mesh_or_scene, args.out, placement, seed=args.seed, crop=args.crop, progress=not args.no_progress):
         written, folder = written + len(done.files), done.files[0].parent
