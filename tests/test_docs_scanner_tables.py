@@ -55,7 +55,7 @@ def _beam_cells(beam: Beam | None) -> list[str]:
     if beam is None:
         return ["—"] * 10
     mrad = _g(math.radians(beam.divergence_deg) * 1e3)
-    scale = "—" if beam.intensity_scale is None else f"{_g(beam.intensity_scale)} / {beam.max_intensity:,}"
+    scale = "—" if beam.intensity_scale is None else f"{beam.intensity_unit}: {_g(beam.intensity_scale)} / {beam.max_intensity:,}"
     return [mrad, str(beam.footprint_rays), str(beam.max_returns), _g(beam.range_resolution_m) if beam.range_resolution_m else "—",
             f"`{beam.return_mode}`", _g(beam.wavelength_nm, 6), _g(beam.detection_threshold) if beam.detection_threshold else "0",
             scale, _g(beam.range_noise_m), f"{_g(beam.min_range_m)} to {_g(beam.max_range_m)}"]  # fmt: skip
@@ -63,7 +63,7 @@ def _beam_cells(beam: Beam | None) -> list[str]:
 
 PRESET_HEADER = (
     "| preset | kind | scan pattern and platform | divergence (mrad) | sub-rays | max returns | range resolution (m) "
-    "| return mode | wavelength (nm) | detection threshold (m⁻²) | intensity scale (counts·m²) / max | range noise σ (m) | range (m) |"
+    "| return mode | wavelength (nm) | detection threshold (m⁻²) | intensity written: unit, scale / max | range noise σ (m) | range (m) |"
 )
 
 

@@ -316,9 +316,10 @@ def test_every_numeric_sensor_field_is_covered() -> None:
     assert {"Lidar.elevations_deg", "Beam.detection_threshold", "Beam.divergence_deg", "Beam.range_noise_m", "Beam.intensity_scale",
             "AirborneScanner.headings_deg", "AirborneScanner.n_lines", "RayTable.time_s", "DepthCamera.K", "DepthCamera.width",
             "DepthCamera.noise"} <= names  # fmt: skip
-    # Lidar: 4 (its ring pattern), AirborneScanner: 8 (swath, rates, flight and plan), RayTable: its 3 columns,
+    # Lidar: 4 (its ring pattern), AirborneScanner: 9 (swath, rates, flight, plan and turns), RayTable: its 3 columns,
     # DepthCamera: 9; Beam: 17 (every pulse and receiver field), tried in the file of each pulsed kind
-    assert len(names) == 4 + 8 + 3 + 9 + 17
+    assert len(names) == 4 + 9 + 3 + 9 + 17
+    assert "AirborneScanner.turn_s" in names
     assert sum(in_beam for *_, in_beam in SENSOR_NUMBERS) == 3 * 17
     assert {new for _, new in LEGACY_NUMBERS} >= {"min_range_m", "max_range_m", "range_noise_m", "divergence_deg", "footprint_rays"}
 

@@ -76,7 +76,8 @@ def test_scan_angle_is_signed_as_asprs_defines_it_and_time_runs_along_the_line()
     assert np.all(s.scan_angle_deg[right] > 0) and np.all(s.scan_angle_deg[s.points[:, 1] > 1.0] < 0)
     np.testing.assert_allclose(s.scan_angle_deg, -s.meta["scan_angle_deg"], rtol=1e-6)
     # the aircraft at x = speed · t fired each pulse from straight above its point's x (nadir-looking across track)
-    np.testing.assert_allclose(s.points[:, 0], 10.0 * s.gps_time, atol=1e-3)
+    # the line is flown from -L/2 at time 0 (its start on the plan's clock), at 10 m/s
+    np.testing.assert_allclose(s.points[:, 0], 10.0 * s.gps_time - s.meta["line_length_m"] / 2.0, atol=1e-3)
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -200,7 +200,8 @@ def test_return_fields_survive_npz_and_old_files_read_with_defaults(tmp_path):
     assert keys[: keys.index("sensor") + 1] == ["points", "ring", "range_m", "face_index", "object_id", "normal",
                                                 "incidence_deg", "sensor_position", "sensor_to_world", "frame", "sensor"]  # fmt: skip
     # then the return fields, and (known here) the beam's intensity scale, the objects' class names and the largest count
-    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "object_classes", "max_intensity"]
+    # and what the device writes of the intensity: a Velodyne's calibrated reflectivity
+    assert keys[keys.index("sensor") + 1 :] == [*S.Scan._RETURNS, "intensity_scale", "object_classes", "max_intensity", "intensity_unit"]
     assert s.max_intensity == lidar.beam.max_intensity == 255
     s.to_npz(tmp_path / "s.npz")
     r = S.read_scan_npz(tmp_path / "s.npz")
@@ -302,21 +303,22 @@ def test_las_round_trip_read_back_by_laspy(compress):
     np.testing.assert_allclose(np.asarray(las.scan_angle) * 0.006, s.scan_angle_deg, atol=0.003)
     # the preset's beam scales the received energy to counts (intensity_scale, the scan keeps it)
     assert s.intensity_scale == lidar.beam.intensity_scale
-    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity))
+    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity, s.range_m))
 
 
 def test_las_intensity_stops_at_the_beams_max_intensity():
-    """A return's LAS intensity is ``min(rint(E · intensity_scale), max_intensity)`` (Beam's docstring): an 8-bit
-    Velodyne reflectivity stops at 255, whatever energy a near target sends back."""
+    """A return's LAS intensity is ``min(rint(E · R² · intensity_scale), max_intensity)`` for a Velodyne's calibrated
+    reflectivity (Beam's docstring): an 8-bit reflectivity stops at 255, however bright the retro-reflector."""
     import io
 
     laspy = pytest.importorskip("laspy")
     scene = S.ScanScene().add({"box_m": [2.0, 2.0, 2.0]}, position_m=(6.0, 1.0))
     lidar = S.Lidar.preset("vlp16")
-    s = S.scan(scene, lidar, seed=1, reflectivity=0.5, azimuth_range_deg=(-60, 60), frame="world")
-    assert lidar.beam.max_intensity == 255 and np.any(s.intensity * lidar.beam.intensity_scale > 255)  # near returns beyond 8 bits
+    s = S.scan(scene, lidar, seed=1, reflectivity=[0.5, 4.0], azimuth_range_deg=(-60, 60), frame="world")
+    beyond = s.intensity * s.range_m**2 * lidar.beam.intensity_scale > 255
+    assert lidar.beam.max_intensity == 255 and np.any(beyond)  # the retro-reflecting box beyond 8 bits
     las = laspy.read(io.BytesIO(s.to_las_bytes(False)))
-    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity))
+    np.testing.assert_array_equal(np.asarray(las.intensity), lidar.beam.intensity_counts(s.intensity, s.range_m))
 
 
 def test_scan_command_writes_las_and_laz(tmp_path, capsys):

@@ -59,6 +59,7 @@ from zbuf_occlude.io.encodings import png_bytes
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.safe_paths import check_found_file
 from zbuf_occlude.sensors.scan_data import read_scan_npz
+from zbuf_occlude.sensors.scan_files import TRAJECTORY_SUFFIX
 from zbuf_occlude.sensors.scene.objects import GROUND_ID
 
 # The statistics (ObjectCloud, cloud_stats, ring_labels, outline_share, ...) are realism_stats' names, documented
@@ -121,7 +122,7 @@ def read_object_clouds(path: str | os.PathLike, *, min_points: int = 1, ground_i
         files = [check_found_file(p, root) for p in found]
     clouds: list[ObjectCloud] = []
     npz = [f for f in files if f.suffix.lower() == ".npz"]
-    csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv"]
+    csvs = [f for f in files if f.suffix.lower() == ".csv" and f.name != "MANIFEST.csv" and not f.name.endswith(TRAJECTORY_SUFFIX)]
     if csvs or not npz and root.is_dir():
         # discovery, labels, de-duplication; beside scan files only LiDARNet's CSVs
         for real in load_real_scans(root, dataset="lidarnet" if npz else "auto"):

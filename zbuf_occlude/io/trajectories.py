@@ -1,4 +1,4 @@
-"""Reading a trajectory file: a CSV of timed poses, its header one of its layouts', parsed into a table of numbers.
+"""Reading and writing a trajectory file: a CSV of timed poses, its header one of its layouts', parsed into a table of numbers.
 
 :func:`zbuf_occlude.sensors.platform.load_trajectory` checks the values and makes the poses.
 """
@@ -14,7 +14,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.caps import MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_LINE_BYTES, MAX_TRAJECTORY_POSES
 from zbuf_occlude.io.regular_files import read_text_file
 
-__all__ = ["read_trajectory_table"]
+__all__ = ["read_trajectory_table", "trajectory_csv_bytes"]
 
 
 def read_trajectory_table(path: str | PathLike[str], headers: tuple[tuple[str, ...], ...], *, within: str | PathLike[str] | None = None
@@ -87,3 +87,23 @@ def _row(path: str | PathLike[str], line: str, number: int, width: int) -> list[
     if len(row) == width:
         return row
     raise InvalidInputError(f"{path}: line {number:,} is not a row of {width} numbers separated by commas")
+
+
+def trajectory_csv_bytes(columns: tuple[str, ...], table: NDArray[np.float64]) -> bytes:
+    """The bytes of a trajectory CSV that :func:`read_trajectory_table` reads back to the same numbers: the header
+    ``columns``, then one line per row of ``table (N, K) float64``, each number as Python's shortest repr of it
+    (a float64 round-trips exactly).
+
+    Raises
+    ------
+    InvalidInputError
+        ``table`` not (N, K) with K the header's width and 1 ≤ N ≤ :data:`~zbuf_occlude.io.caps.MAX_TRAJECTORY_POSES`,
+        or not finite.
+    """
+    a = np.asarray(table, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != len(columns) or not 1 <= len(a) <= MAX_TRAJECTORY_POSES or not np.all(np.isfinite(a)):
+        raise InvalidInputError(
+            f"a trajectory table must be 1 to {MAX_TRAJECTORY_POSES:,} finite rows of {len(columns)} numbers, got shape {a.shape}"
+        )
+    lines = [",".join(columns), *(",".join(repr(float(v)) for v in row) for row in a)]
+    return ("\n".join(lines) + "\n").encode("utf-8")

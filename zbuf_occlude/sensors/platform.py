@@ -238,6 +238,14 @@ class Trajectory:
         rotation = Slerp(self.time_s[window], Rotation.from_matrix(self.rotation[window]))(t).as_matrix()
         return rotation, position
 
+    def euler_table(self, time_offset_s: float = 0.0) -> NDArray[np.float64]:
+        """(T, 7) float64: the rows of :data:`EULER_COLUMNS` that :func:`load_trajectory` reads back to these poses, times
+        plus ``time_offset_s``; each angle column unwrapped (179 then 181, not 179 then -179), as the reader wants."""
+        from scipy.spatial.transform import Rotation
+
+        angles = np.degrees(np.unwrap(np.radians(Rotation.from_matrix(self.rotation).as_euler("xyz", degrees=True)), axis=0))
+        return np.column_stack([self.time_s + float(time_offset_s), self.position_m, angles])
+
     def since(self, start_s: float, until_s: float | None = None) -> Trajectory:
         """The trajectory from ``start_s`` on: the pose there (:meth:`poses_at`), then the samples after it.
 

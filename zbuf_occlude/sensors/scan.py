@@ -267,9 +267,9 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         (default) for both: a beam that resolves echoes and scales intensities (every airborne
         preset's, and a sensor fitted to a LAS file) takes ``"table"`` for both, the materials'
         reflectances and foliage's gap fraction (:func:`~zbuf_occlude.sensors.scene.materials.scene_optics`),
-        which its intensities and its returns through a canopy rest on; any other beam none.  With
-        one of them given, an ``"auto"`` other is none.  None: none (opaque surfaces; a detection
-        threshold applies with ρ = 1).
+        which its intensities and its returns through a canopy rest on; any other beam none.  Each
+        ``"auto"`` is decided on its own: giving one of them leaves the other as ``"auto"`` makes it.
+        None: none (opaque surfaces; a detection threshold applies with ρ = 1).
     footprint : {"auto", "exact", "adaptive"}
         As :func:`scan`'s.
 
@@ -280,9 +280,10 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         ``sensor_position`` the mean aircraft position of the returns.  ``meta``:
         ``scan_angle_deg`` (N,) float64 and ``line_id`` (N,) int32 per return; ``phase_s`` (the
         first line's), ``line_phase_s`` (per line, by id), ``lateral_shift_m`` (per heading),
-        ``n_rays``.  The return fields: ``pulse_id`` the pulse's row among all the plan's pulses,
-        ``gps_time`` its firing time along its flight line (the aircraft passes x = 0 of its
-        line's frame at 0), ``scan_angle_deg`` the across-track angle signed as ASPRS LAS 1.4
+        ``line_length_m``, ``line_start_s`` (per line, by id), ``trajectory`` (the aircraft's flight,
+        :mod:`~zbuf_occlude.sensors.patterns.flight_times`), ``n_rays``.  The return fields: ``pulse_id`` the
+        pulse's row among all the plan's pulses, ``gps_time`` its firing time on the plan's clock (the lines
+        flown one after another from 0 on), ``scan_angle_deg`` the across-track angle signed as ASPRS LAS 1.4
         defines it (``−meta["scan_angle_deg"]``).  The same seed gives the same bytes.
 
     Raises
@@ -298,7 +299,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     built = _built(scene)
     auto = [isinstance(v, str) and v == AUTO_OPTICS for v in (reflectivity, transmittance)]
     radiometric = scanner.beam.resolves_echoes and scanner.beam.intensity_scale is not None
-    fill = "table" if all(auto) and radiometric else None  # one given: the other none
+    fill = "table" if radiometric else None  # each "auto" on its own: a transmittance given keeps the table's reflectances
     reflectivity, transmittance = (fill if a else v for a, v in zip(auto, (reflectivity, transmittance)))
     rng = np.random.default_rng(seed)
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
@@ -435,6 +436,7 @@ def fire_pulses(
         scan_angle_deg=pulses.scan_angle_deg[rows],
         intensity_scale=beam.intensity_scale,
         max_intensity=beam.max_intensity,
+        intensity_unit=beam.intensity_unit,
         object_classes=object_classes(built),
     )
 

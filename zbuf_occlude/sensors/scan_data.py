@@ -19,7 +19,7 @@ from zbuf_occlude.io.arrays import load_npz
 from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
-from zbuf_occlude.sensors.beam.fields import intensity_counts
+from zbuf_occlude.sensors.beam.fields import INTENSITY_UNITS, device_quantity, intensity_counts
 from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, namer
 
 __all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start", "read_scan_npz"]
@@ -30,8 +30,8 @@ FRAMES = ("sensor", "world")
 #: 2026-01-01T00:00:00 UTC, seconds: the time 0 of a scan written as LAS.  GPS time counts from
 #: 1980-01-06T00:00:00 UTC without leap seconds: 16,797 days to 2026-01-01 (date(2026, 1, 1) −
 #: date(1980, 1, 6)) · 86,400 s = 1,451,260,800 s of UTC, plus the 18 leap seconds UTC took since
-#: (GPS − UTC = 18 s since 2017-01-01, IERS Bulletin C) = 1,451,260,818 s; minus 10⁹.  An airborne
-#: scan's times (a few minutes negative at most) stay far above 0.
+#: (GPS − UTC = 18 s since 2017-01-01, IERS Bulletin C) = 1,451,260,818 s; minus 10⁹.  Every scan's times,
+#: an airborne plan's included (its lines flown one after another from 0 on), are ≥ 0.
 GPS_START_S = 451_260_818.0
 #: The coarsest step between the float64 GPS times of a scan's LAS file, seconds: 1 µs.  LAS stores
 #: GPS time as float64 seconds (R15, "GPS Time"), whose step doubles with every power of 2 of the
@@ -175,8 +175,8 @@ class Scan:
         LiDAR: firing time of the pulse, seconds from the revolution's first firing
         (``(azimuth index + b / n_beams) / (n_azimuths · rotation_hz)``, beam ``b`` firing
         ``b / n_beams`` of a cycle after the cycle's first: every pulse a time of its own);
-        the returns of one pulse share it (airborne: the firing time along the flight line,
-        :func:`~zbuf_occlude.sensors.scan.scan_airborne`; a ray table: its row's ``time_s``,
+        the returns of one pulse share it (airborne: the firing time on the flight plan's clock, its
+        lines flown one after another from 0 on, :func:`~zbuf_occlude.sensors.scan.scan_airborne`; a ray table: its row's ``time_s``,
         exactly).  On a :class:`~zbuf_occlude.sensors.platform.Trajectory`, the time on the
         trajectory's clock (its ``start_s`` plus the time into the sweep).
     scan_angle_deg : (N,) float32 or None
@@ -189,6 +189,9 @@ class Scan:
     max_intensity : int or None
         The largest count the scanner stores, 1 to 65535 (an 8-bit reflectivity's 255): the
         beam's; None: 65535.
+    intensity_unit : {"energy", "reflectivity"}
+        What the scanner writes of :attr:`intensity`: its counts, or counts of the calibrated reflectivity
+        ``intensity · range_m²`` (:data:`~zbuf_occlude.sensors.beam.fields.INTENSITY_UNITS`, the beam's).
     object_classes : tuple of str or None
         Class name by object id (index 0: ``"ground"``, the objects, then the occluders, as the
         scene numbers them); None: not known.  :meth:`to_las_bytes` classifies points by it.
@@ -218,6 +221,7 @@ class Scan:
     intensity_scale: float | None = None
     object_classes: tuple[str, ...] | None = None
     max_intensity: int | None = None
+    intensity_unit: str = "energy"
 
     #: Per-point arrays of every scan, in file order.
     _BASE = ("points", "ring", "pixel", "range_m", "face_index", "object_id", "normal", "incidence_deg")
@@ -244,7 +248,8 @@ class Scan:
         """The NPZ content: every present per-point field of the base set, ``sensor_position``,
         ``sensor_to_world``, ``frame`` and ``sensor`` (0-d strings), then the present return fields
         (``return_number`` ... ``scan_angle_deg``), then, when known, ``intensity_scale`` (0-d
-        float64), ``object_classes`` (``(K,)`` strings) and ``max_intensity`` (0-d int64)."""
+        float64), ``object_classes`` (``(K,)`` strings), ``max_intensity`` (0-d int64) and, where it is not
+        ``"energy"``, ``intensity_unit`` (0-d string)."""
         out = {k: getattr(self, k) for k in self._BASE if getattr(self, k) is not None}
         out.update(sensor_position=np.asarray(self.sensor_position, np.float64), sensor_to_world=self.sensor_to_world,
                    frame=np.array(self.frame), sensor=np.array(self.sensor))  # fmt: skip
@@ -255,6 +260,8 @@ class Scan:
             out["object_classes"] = np.array(list(self.object_classes), dtype=str).reshape(len(self.object_classes))
         if self.max_intensity is not None:
             out["max_intensity"] = np.array(int(self.max_intensity), np.int64)
+        if self.intensity_unit != "energy":
+            out["intensity_unit"] = np.array(self.intensity_unit)
         return out
 
     def to_npz(self, path: str | os.PathLike) -> Path:
@@ -303,13 +310,14 @@ class Scan:
 
         * ``return_number``, ``number_of_returns``, ``scan_angle_deg`` (a spinning scanner: the
           beam's elevation; airborne: the across-track angle) as the scan holds them;
-        * ``intensity``: ``rint(clip(intensity · scale, 0, top))`` counts, ``scale`` the
+        * ``intensity``: ``rint(clip(q · scale, 0, top))`` counts, ``q`` the :attr:`intensity` (or, where the
+          scanner writes a calibrated reflectivity, :attr:`intensity_unit`, ``intensity · range_m²``), ``scale`` the
           ``intensity_scale`` given, else the scan's :attr:`intensity_scale` (its beam's), else
           65535 (:data:`UNIT_INTENSITY_SCALE`: a received energy of 1 m⁻² or more stores 65535);
           ``top`` the scan's :attr:`max_intensity` (its beam's), else 65535;
         * ``gps_time``: adjusted standard GPS time (global encoding bit 0 set), ``gps_start_s``
-          plus the scan's :attr:`gps_time` (seconds from its first firing; airborne: along the
-          flight line, a few minutes negative at most);
+          plus the scan's :attr:`gps_time` (seconds from its first firing; airborne: from the
+          start of the plan's first line, its lines one after another);
         * ``classification``: the ASPRS class of the object hit
           (:func:`~zbuf_occlude.sensors.scene.las_classes.asprs_classification`: ground 2, vegetation
           3/4/5 by height above ``ground_z_m`` in the world frame, building 6, others 1; a
@@ -379,7 +387,7 @@ class Scan:
         ones = np.ones(n, np.uint8)
         intensity = np.zeros(n, np.uint16)
         if self.intensity is not None:
-            intensity = intensity_counts(self.intensity, scale, top)
+            intensity = intensity_counts(device_quantity(self.intensity, self.range_m, self.intensity_unit), scale, top)
         relative = np.zeros(n) if self.gps_time is None else np.asarray(self.gps_time, np.float64)
         times = check_gps_start(gps_start_s, relative) + relative
         points = np.asarray(self.points, np.float64)
@@ -448,7 +456,7 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
             continue
         if a.dtype.kind not in "fiu" or a.shape != shape or not np.isfinite(a).all():
             raise InvalidInputError(f"{path}: {key} must be a finite {shape} number array, got shape {a.shape} dtype {a.dtype}")
-    for key in ("frame", "sensor"):
+    for key in ("frame", "sensor", "intensity_unit"):
         if key in d and (d[key].dtype.kind != "U" or d[key].ndim != 0):
             raise InvalidInputError(f"{path}: {key} must be a string, got shape {d[key].shape} dtype {d[key].dtype}")
     if "intensity_scale" in d:
@@ -464,8 +472,9 @@ def _checked_npz(path: Path, d: dict[str, np.ndarray]) -> None:
         if a.dtype.kind != "U" or a.ndim != 1 or len(a) > MAX_SCENE_OBJECTS + 1:
             raise InvalidInputError(f"{path}: object_classes must be at most {MAX_SCENE_OBJECTS + 1:,} strings (N,), got shape {a.shape} "
                                     f"dtype {a.dtype}")  # fmt: skip
-    if "frame" in d and str(d["frame"]) not in FRAMES:
-        raise InvalidInputError(f"{path}: frame must be one of {FRAMES}, got {str(d['frame'])!r}")
+    for key, choices in (("frame", FRAMES), ("intensity_unit", INTENSITY_UNITS)):
+        if key in d and str(d[key]) not in choices:
+            raise InvalidInputError(f"{path}: {key} must be one of {choices}, got another string")
     for key in ("return_number", "number_of_returns"):  # LAS 1.4's 1..15, before uint8 would wrap 257 to 1
         a = d.get(key)
         if a is not None and len(a) and not (int(a.min()) >= 1 and int(a.max()) <= 15):
@@ -517,4 +526,5 @@ def read_scan_npz(path: str | os.PathLike) -> Scan:
         intensity_scale=float(d["intensity_scale"]) if "intensity_scale" in d else None,
         object_classes=tuple(str(c) for c in d["object_classes"]) if "object_classes" in d else None,
         max_intensity=int(d["max_intensity"]) if "max_intensity" in d else None,
+        intensity_unit=str(d["intensity_unit"]) if "intensity_unit" in d else "energy",
     )  # fmt: skip

@@ -17,19 +17,24 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.trajectories import trajectory_csv_bytes
 from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
 from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
+from zbuf_occlude.sensors.platform import EULER_COLUMNS, Trajectory
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
 from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
 
-__all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
+__all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "TRAJECTORY_SUFFIX", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
            "scan_scene_file"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
-#: The files a scan writes in its folder: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``.
-SCAN_FILE_NAMES = r"[^/]+_s\d{3,}\.(npz|ply|las|laz)"
+#: The files a scan writes in its folder: ``<stem>_<sensor>_sNNN.npz|ply|las|laz``, and ``<stem>_<sensor>_sNNN_trajectory.csv``
+#: beside the LAS/LAZ files of a scan whose platform moves along a trajectory it made (an airborne scanner's flight).
+SCAN_FILE_NAMES = r"[^/]+_s\d{3,}(\.(npz|ply|las|laz)|_trajectory\.csv)"
+#: The end of a scan's trajectory file's name.
+TRAJECTORY_SUFFIX = "_trajectory.csv"
 #: Unit primitives :func:`run_scan` takes by name instead of a mesh file (stretched by the placement's ``extents_m``).
 PRIMITIVES = {
     "cylinder": {"cylinder": {"radius_m": 0.5, "height_m": 1.0, "sections": 48}},
@@ -53,6 +58,10 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     """Write ``scan`` as ``<stem>.<format>`` for each of the request's formats through ``folder`` (an
     :class:`~zbuf_occlude.io.owned.OwnedFolder`): a LAS/LAZ file (1.4, point format 6) with the request's ``las``
     keywords, ``ground_z_m`` and ``number`` modulo 65,536 as its point source id where it has no flight lines.
+    A scan whose platform flew a trajectory of its own (``scan.meta["trajectory"]``: an airborne scanner's flight,
+    :mod:`~zbuf_occlude.sensors.patterns.flight_times`) written as LAS or LAZ also writes it, ``<stem>_trajectory.csv``
+    (:data:`~zbuf_occlude.sensors.platform.EULER_COLUMNS`, read back by :func:`~zbuf_occlude.sensors.platform.load_trajectory`),
+    its times on the LAS files' clock: the scan's own plus the request's ``gps_start_s``.
 
     Raises
     ------
@@ -61,8 +70,8 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
         naming ``gps_start_s`` as the request's names map it).
     """
     files = []
+    start = request.las.get("gps_start_s", GPS_START_S)  # to_las_bytes' default where the request gives none
     if set(request.formats) & set(LAS_FORMATS):
-        start = request.las.get("gps_start_s", GPS_START_S)  # to_las_bytes' default where the request gives none
         check_gps_start(start, scan.gps_time, name=request.names.get("gps_start_s") or "gps_start_s")
     for fmt in request.formats:
         if fmt in LAS_FORMATS:  # encoded in memory
@@ -72,6 +81,10 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
             with folder.write(f"{stem}.{fmt}") as tmp:
                 getattr(scan, f"to_{fmt}")(tmp)
         files.append(folder.root / f"{stem}.{fmt}")
+    trajectory = scan.meta.get("trajectory")
+    if isinstance(trajectory, Trajectory) and set(request.formats) & set(LAS_FORMATS):  # a survey's LAS comes with its trajectory
+        folder.write_bytes(stem + TRAJECTORY_SUFFIX, trajectory_csv_bytes(EULER_COLUMNS, trajectory.euler_table(start)))
+        files.append(folder.root / (stem + TRAJECTORY_SUFFIX))
     return tuple(files)
 
 

@@ -1,8 +1,10 @@
 """A user's path on a real airborne tile: fit a sensor to it, scan a plot of vegetation meshes with that sensor, compare.
 
-    python docs/results/scanners/user_path.py ../shared/data/als_returns/ign_lidarhd_sample.laz ../shared/data/street_objects/bush SEEDS [SCAN OPTIONS]
+    python docs/results/scanners/user_path.py ../shared/data/als_returns/ign_lidarhd_sample.laz ../shared/data/street_objects/bush SEEDS \
+        [--preset NAME] [SCAN OPTIONS]
 
-1. ``zbuf-occlude fit-sensor TILE --sensor riegl-q1560 --altitude 1500 --out OUT/fitted.json`` (the command a user runs);
+1. ``zbuf-occlude fit-sensor TILE --sensor riegl-q1560 --altitude 1500 --out OUT/fitted.json`` (the command a user runs;
+   with ``--preset NAME`` no fit: the preset as it comes, out of the box);
 2. a plot of the vegetation meshes at their real sizes (``experiments.returns.PLOT_TREES``) on flat ground, 14 m apart;
 3. ``zbuf-occlude scan plot.json --sensor OUT/fitted.json --format laz --seed S`` over the plot (a scene file of the meshes),
    one seed at a time, the LAZ read back with laspy;
@@ -38,7 +40,13 @@ def tile_figures(path: Path) -> dict[str, float]:
     i = np.asarray(las.intensity, np.float64)
     high = cls == 5
     return {"multi_share": float((n[high] > 1).mean()), "ratio": float(np.median(i[high & (n > 1) & (r == 1)]) / np.median(i[high & (n == 1)])),
-            "intensity_median": float(np.median(i[high]))}  # fmt: skip
+            "intensity_median": float(np.median(i[high])), **_ground_spread(cls, n, i)}  # fmt: skip
+
+
+def _ground_spread(cls, n, i) -> dict[str, float]:
+    """The intensities of single returns of the ground (class 2): p5, p50, p95 and p95 / p5."""
+    p5, p50, p95 = np.percentile(i[(cls == 2) & (n == 1)], [5, 50, 95])
+    return {"ground_p5": float(p5), "ground_p50": float(p50), "ground_p95": float(p95), "ground_spread": float(p95 / max(p5, 1.0))}
 
 
 def plot_figures(laz: bytes) -> dict[str, float]:
@@ -50,7 +58,8 @@ def plot_figures(laz: bytes) -> dict[str, float]:
     several, single = i[high & (n > 1) & (r == 1)], i[high & (n == 1)]
     return {"points": int(high.sum()), "multi_share": float((n[high] > 1).mean()),
             "ratio": float(np.median(several) / np.median(single)) if len(several) and len(single) else float("nan"),
-            "intensity_median": float(np.median(i[high])), "zero": float((i[high] == 0).mean()), "saturated": float((i[high] == 65535).mean())}  # fmt: skip
+            "intensity_median": float(np.median(i[high])), "zero": float((i == 0).mean()), "saturated": float((i[high] == 65535).mean()),
+            **_ground_spread(cls, n, i)}  # fmt: skip
 
 
 def plot_file(seed: int, spacing_m: float = 14.0) -> dict:
@@ -71,18 +80,22 @@ def plot_file(seed: int, spacing_m: float = 14.0) -> dict:
 
 def main(tile: str, bush_folder: str, seeds: int, extra: list[str]) -> None:
     out = Path(tempfile.mkdtemp(prefix="user_path_"))
-    fitted = out / "fitted.json"
-    subprocess.run([sys.executable, "-m", "zbuf_occlude", "fit-sensor", tile, "--sensor", "riegl-q1560", "--altitude", "1500",
-                    "--out", str(fitted)], check=True)  # fmt: skip
+    if extra[:1] == ["--preset"]:  # the preset out of the box, no fit
+        fitted, extra = extra[1], extra[2:]
+    else:
+        fitted = out / "fitted.json"
+        subprocess.run([sys.executable, "-m", "zbuf_occlude", "fit-sensor", tile, "--sensor", "riegl-q1560", "--altitude", "1500",
+                        "--out", str(fitted)], check=True)  # fmt: skip
     sensor = sensor_from_name(fitted)
     b = sensor.beam
     print(
-        f"fitted beam: divergence {b.divergence_deg * np.pi / 180 * 1e3:.3f} mrad, {b.footprint_rays} sub-rays, max returns {b.max_returns}, "
+        f"{sensor.name} beam: divergence {b.divergence_deg * np.pi / 180 * 1e3:.3f} mrad, {b.footprint_rays} sub-rays, max returns {b.max_returns}, "
         f"range resolution {b.range_resolution_m:.3f} m, threshold {b.detection_threshold:.3g} m^-2, intensity scale {b.intensity_scale:.3g}"
     )
     real = tile_figures(Path(tile))
     print(
-        f"tile, high vegetation: multi-return share {real['multi_share']:.3f}, intensity ratio {real['ratio']:.3f}, median {real['intensity_median']:.0f}"
+        f"tile, high vegetation: multi-return share {real['multi_share']:.3f}, intensity ratio {real['ratio']:.3f}, median {real['intensity_median']:.0f}; "
+        f"ground single returns p5/p50/p95 {real['ground_p5']:.0f}/{real['ground_p50']:.0f}/{real['ground_p95']:.0f}"
     )
     shutil.copytree(bush_folder, out / "meshes")
     rows = []
@@ -95,9 +108,10 @@ def main(tile: str, bush_folder: str, seeds: int, extra: list[str]) -> None:
         rows.append(row)
         print(
             f"seed {seed}: {row['points']} high-vegetation points, multi-return share {row['multi_share']:.3f}, ratio {row['ratio']:.3f}, "
-            f"median {row['intensity_median']:.0f}, zero {row['zero']:.3f}, saturated {row['saturated']:.3f}"
+            f"median {row['intensity_median']:.0f}, zero {row['zero']:.3f}, saturated {row['saturated']:.3f}, ground single returns "
+            f"p5/p50/p95 {row['ground_p5']:.0f}/{row['ground_p50']:.0f}/{row['ground_p95']:.0f}"
         )
-    for key in ("multi_share", "ratio", "intensity_median"):
+    for key in ("multi_share", "ratio", "intensity_median", "ground_spread"):
         v = np.array([r[key] for r in rows])
         print(
             f"{key}: {v.mean():.3f} ± {v.std(ddof=1) if len(v) > 1 else 0:.3f} (tile {real[key]:.3f}; simulated / tile {v.mean() / real[key]:.3f})"

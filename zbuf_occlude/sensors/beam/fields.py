@@ -42,7 +42,7 @@ from zbuf_occlude.sensors.beam.footprint import (
 
 __all__ = [
     "Beam", "IDEAL_BEAM", "RETURN_MODES", "RETURN_FIELDS", "MODE_RETURNS", "MAX_INTENSITY_COUNTS", "check_beam", "check_returns",
-    "footprint_changes", "intensity_counts",
+    "footprint_changes", "intensity_counts", "INTENSITY_UNITS", "device_quantity",
 ]  # fmt: skip
 
 #: How the receiver turns a pulse's resolved echoes into returns (``Beam.return_mode``):
@@ -60,6 +60,15 @@ __all__ = [
 RETURN_MODES = ("all", "strongest", "last", "dual")
 #: Largest intensity a LAS file stores (unsigned 16 bits).
 MAX_INTENSITY_COUNTS = 65_535
+#: What a device writes as a return's intensity (``Beam.intensity_unit``), in counts of ``intensity_scale``:
+#:
+#: ``"energy"``
+#:     the received energy E, m⁻², which falls as 1/R² (an airborne receiver's raw counts).
+#: ``"reflectivity"``
+#:     a calibrated reflectivity, E · R², the apparent reflectance ρ |cos θ| s of the echo (s: the share of the
+#:     pulse's footprint it intercepts), independent of range and of the laser's power: what Velodyne, Ouster and
+#:     Livox units report (the presets' sources).
+INTENSITY_UNITS = ("energy", "reflectivity")
 
 
 @dataclass(frozen=True)
@@ -134,6 +143,12 @@ class Beam:
         energies).
     max_intensity : int
         Largest count the device reports, 1..65535 (255 for an 8-bit reflectivity, Velodyne's).
+    intensity_unit : {"energy", "reflectivity"}
+        What the device writes (:data:`INTENSITY_UNITS`): ``"energy"`` (default) counts of the received energy,
+        ``min(round(E · intensity_scale), max_intensity)``; ``"reflectivity"`` counts of its calibrated reflectivity,
+        ``min(round(E · R² · intensity_scale), max_intensity)`` with R the return's range, so that
+        ``intensity_scale`` is counts per unit reflectance (a Velodyne's 100: a white diffuse wall head-on reads 100
+        at any range).
     range_noise_m : float
         σ of the Gaussian range error, metres.
     dropout : float
@@ -175,6 +190,7 @@ class Beam:
     power_noise: float = 0.0
     intensity_scale: float | None = None
     max_intensity: int = MAX_INTENSITY_COUNTS
+    intensity_unit: str = "energy"
     range_noise_m: float = 0.0
     dropout: float = 0.0
     dropout_range_per_m: float = 0.0
@@ -204,6 +220,7 @@ class Beam:
         text(self.profile, "profile", choices=PROFILES)
         text(self.return_mode, "return_mode", choices=RETURN_MODES)
         text(self.echo_rule, "echo_rule", choices=ECHO_RULES)
+        text(self.intensity_unit, "intensity_unit", choices=INTENSITY_UNITS)
         object.__setattr__(self, "footprint_rays", count(self.footprint_rays, "footprint_rays", low=1, high=MAX_SUBRAYS))
         object.__setattr__(self, "max_returns", count(self.max_returns, "max_returns", low=1, high=MAX_RETURNS))
         object.__setattr__(self, "max_intensity", count(self.max_intensity, "max_intensity", low=1, high=MAX_INTENSITY_COUNTS))
@@ -263,18 +280,38 @@ class Beam:
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         return subray_directions(d, footprint_offsets(self.footprint_rays, self.divergence_deg)[0])
 
-    def intensity_counts(self, energy: ArrayLike) -> NDArray[np.uint16]:
-        """(N,) uint16 LAS intensities of received energies ``energy (N,)`` m⁻²: :func:`intensity_counts` with the beam's
-        ``intensity_scale`` and ``max_intensity``.
+    def intensity_counts(self, energy: ArrayLike, range_m: ArrayLike | None = None) -> NDArray[np.uint16]:
+        """(N,) uint16 intensities the device writes for received energies ``energy (N,)`` m⁻² at ranges ``range_m (N,)``
+        metres: :func:`intensity_counts` of :func:`device_quantity` with the beam's ``intensity_scale``, ``max_intensity``
+        and ``intensity_unit``.
 
         Raises
         ------
         InvalidInputError
-            The beam has no ``intensity_scale``.
+            The beam has no ``intensity_scale``; a reflectivity without ``range_m``.
         """
         if self.intensity_scale is None:
             raise InvalidInputError("the beam has no intensity_scale (counts per unit of received energy)")
-        return intensity_counts(energy, self.intensity_scale, self.max_intensity)
+        return intensity_counts(device_quantity(energy, range_m, self.intensity_unit), self.intensity_scale, self.max_intensity)
+
+
+def device_quantity(energy: ArrayLike, range_m: ArrayLike | None, unit: str) -> NDArray[np.float64]:
+    """(N,) float64: what a device of ``unit`` (:data:`INTENSITY_UNITS`) measures of echoes of received energy
+    ``energy (N,)`` m⁻² at ranges ``range_m (N,)`` metres: the energy itself, or the calibrated reflectivity
+    ``E · R²`` (unitless apparent reflectance).  The one rule of a beam's counts and of a scan's LAS file.
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown unit; a reflectivity without ranges, or with ranges of another shape.
+    """
+    e = np.asarray(energy, dtype=np.float64)
+    if text(unit, "intensity_unit", choices=INTENSITY_UNITS) == "energy":
+        return e
+    if range_m is None or np.shape(range_m) != e.shape:
+        raise InvalidInputError(f"a calibrated reflectivity needs each return's range: {np.shape(e)} energies, ranges "
+                                f"{'none' if range_m is None else np.shape(range_m)}")  # fmt: skip
+    return e * np.square(np.asarray(range_m, dtype=np.float64))
 
 
 def intensity_counts(energy: ArrayLike, scale: float, top: int = MAX_INTENSITY_COUNTS) -> NDArray[np.uint16]:

@@ -25,7 +25,7 @@ in ``headings_deg`` (degrees counter-clockwise from +x; not a compass heading), 
 side_overlap)`` apart (:attr:`AirborneScanner.flight_line_spacing_m`; ``side_overlap``: the
 fraction of a strip's width its neighbour covers again), centred on the plan centre (the world
 origin) and shifted together across track by a lateral shift; every line starts at its own time
-phase.  Line ``j`` of heading ``h`` has the id ``h · n_lines + j``.  With the defaults
+phase, and the lines are flown one after another, ``turn_s`` apart (:mod:`~zbuf_occlude.sensors.patterns.flight_times`).  Line ``j`` of heading ``h`` has the id ``h · n_lines + j``.  With the defaults
 (``n_lines=1``, ``headings_deg=(0,)``) the plan is the single line above.
 
 Overlapping strips add up: where the block is unbounded (at least ``W/2 − s`` inside its outer
@@ -69,6 +69,7 @@ from zbuf_occlude.sensors.checks import (
     sensor_name,
     text,
 )
+from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_trajectory, line_length_m, line_start_s
 from zbuf_occlude.sensors.pulses import Pulses
 
 __all__ = ["AIRBORNE_IDEAL_BEAM", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine"]
@@ -80,6 +81,8 @@ AIRBORNE_IDEAL_BEAM = IDEAL_BEAM.with_(wavelength_nm=1064.0)
 #: Most flight lines one plan may hold (``n_lines · len(headings_deg)``): a sensor file is
 #: untrusted input, and each line costs a pass over the scanned square.
 MAX_FLIGHT_LINES = 256
+#: Longest ``turn_s``, seconds: a day.
+MAX_TURN_S = 86_400.0
 
 
 @dataclass(frozen=True)
@@ -148,6 +151,10 @@ class AirborneScanner:
     headings_deg : tuple of float
         One block of ``n_lines`` lines per heading, degrees counter-clockwise from +x (two
         headings 90° apart: a cross-hatched survey).
+    turn_s : float
+        Seconds from the end of one flight line to the start of the next, > 0 (default
+        :data:`~zbuf_occlude.sensors.patterns.flight_times.TURN_S`): the plan's lines are flown one
+        after another (:mod:`~zbuf_occlude.sensors.patterns.flight_times`).
 
     Raises
     ------
@@ -172,6 +179,7 @@ class AirborneScanner:
     n_lines: int = 1
     side_overlap: float = 0.0
     headings_deg: tuple[float, ...] = (0.0,)
+    turn_s: float = TURN_S
 
     def __post_init__(self) -> None:
         sensor_name(self.name, "airborne scanner name")
@@ -185,6 +193,7 @@ class AirborneScanner:
             "pulse_rate_hz": positive, "line_rate_hz": positive, "altitude_m": {**positive, "high": MAX_RANGE_M},
             "speed_mps": positive, "swath_deg": {**positive, "high": 180.0, "high_open": True},
             "side_overlap": {"low": 0.0, "high": 1.0, "high_open": True, "expected": "a fraction in [0, 1)"},
+            "turn_s": {"low": 0.0, "low_open": True, "high": MAX_TURN_S},
         }  # fmt: skip
         for name, bounds in numbers.items():
             object.__setattr__(self, name, real(getattr(self, name), name, **bounds))
@@ -332,13 +341,15 @@ class AirborneScanner:
         -------
         Pulses
             World frame, one origin per pulse (the aircraft's position); ``pulse_id`` the pulse's
-            row among all the plan's pulses, line by line; ``time_s`` its firing time along its
-            line (the aircraft passes x = 0 of its line's frame at 0); ``scan_angle_deg`` the
+            row among all the plan's pulses, line by line; ``time_s`` its firing time on the plan's
+            clock (the lines flown one after another from 0 on, :mod:`~zbuf_occlude.sensors.patterns.flight_times`:
+            line ``i`` at ``line_start_s[i]`` plus ``(x + L/2) / v`` for the aircraft at x along it); ``scan_angle_deg`` the
             across-track angle from nadir signed as ASPRS LAS 1.4 defines it (counter-clockwise
             seen from behind the aircraft is positive: the right, −y, side of a line flown along
             +x); per point in ``meta``: ``scan_angle_deg`` (the angle θ, +y side positive) and
             ``line_id``; the beam's detection threshold applies with ρ = 1 where no reflectivity
-            is given.
+            is given; in ``meta`` also ``line_length_m`` (L), ``line_start_s`` (per line, by id) and
+            ``trajectory``, the aircraft's :class:`~zbuf_occlude.sensors.platform.Trajectory` on that clock.
 
         Raises
         ------
@@ -361,7 +372,9 @@ class AirborneScanner:
         else:
             shifts = scanner._shifts(lateral_shift_m).tolist()
         parts = []
-        for line in scanner.flight_lines(shifts):
+        length = line_length_m(center_xy, half_size_m)
+        lines = scanner.flight_lines(shifts)
+        for line in lines:
             if line.is_reference:
                 o, d, a, ts = scanner.ground_rays(center_xy, half_size_m, phases[line.line_id], with_time=True)
             else:
@@ -370,7 +383,8 @@ class AirborneScanner:
                 along, across = line.axes()
                 o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
                 d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
-            parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts))
+            flown = line_start_s(line.line_id, length, scanner.speed_mps, scanner.turn_s) + length / (2.0 * scanner.speed_mps)
+            parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts + flown))  # on the plan's clock
             n_rays = sum(len(p[2]) for p in parts)
             if n_rays * scanner.beam.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
                 raise InvalidInputError(
@@ -382,7 +396,9 @@ class AirborneScanner:
             origins, directions, angle, line_id, fired = parts[0]
         else:
             origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
-        meta = {"phase_s": phases[0], "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts)}
+        meta = {"phase_s": phases[0], "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts),
+                "line_length_m": length, "line_start_s": tuple(line_start_s(range(n_total), length, scanner.speed_mps, scanner.turn_s)),
+                "trajectory": flown_trajectory(lines, length, scanner.altitude_m, scanner.speed_mps, scanner.turn_s, name=scanner.name)}  # fmt: skip
         return Pulses(
             directions, directions, origins, None, pulse_id=np.arange(len(origins), dtype=np.int64), time_s=fired,
             scan_angle_deg=(-angle).astype(np.float32), per_pulse_meta={"scan_angle_deg": angle, "line_id": line_id}, meta=meta,

@@ -37,19 +37,27 @@ __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]
 # "Virtual laser scanning with HELIOS++", Remote Sens. Environ. 269, 112772), 1/e² full angles.
 # Range resolution: half the pulse length, c·τ/2 (4 ns: 0.60 m), or the data sheet's vertical
 # discrimination where it gives one (ALS50-II: 3.5 m).  Sub-rays: 19 per pulse, the count at which
-# a tree's multi-return share settles within a few points (docs/results/returns.md); every echo
-# above 0 is recorded (no detection threshold: measure one with fit-sensor).  Intensity: counts
+# a tree's multi-return share settles within a few points (docs/results/returns.md).  Detection: the receiver's
+# quantisation floor, one count (an echo that would read 0 counts is noise, not a return; fit-sensor measures a
+# real receiver's higher floor, 23 counts on the IGN sample).  Power noise: σ = 0.3 of the natural log of each
+# firing's received power, a spread of about 30 % in the intensity of one surface (speckle averaged over the receiver's
+# aperture, and the reflectance of natural ground varying from spot to spot): an ASSUMPTION, chosen before any
+# comparison and not fitted (the IGN sample's single ground returns, p95 / p5 = 3.7, would give 0.4 by the same
+# measure; docs/results/scanners/user_path.py).  Intensity: counts
 # per unit of received energy measured by fit-sensor on the IGN LiDAR HD sample (a RIEGL
 # full-waveform scanner flown at ~1,300 m), 1.67e9 counts·m², 16-bit (RIEGL: "16-bit intensity
 # per echo"); for the Leica and Optech scanners the same scale is an ASSUMPTION.
 _SUBRAYS = 19
 _IGN_COUNTS = 1.67e9
+_POWER_NOISE = 0.3
 _FOUR_NS_M = 0.5 * 299_792_458.0 * 4e-9  # c·τ/2 of a 4 ns pulse: 0.5996 m
 
 
 def _airborne_beam(name: str, source: str, **fields) -> Beam:
-    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN intensity scale (comment above)."""
-    fields = {"wavelength_nm": 1064.0, "footprint_rays": _SUBRAYS, "intensity_scale": _IGN_COUNTS, **fields}
+    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN intensity scale, a detection
+    threshold of one count and a power noise of 0.3 (comment above)."""
+    fields = {"wavelength_nm": 1064.0, "footprint_rays": _SUBRAYS, "intensity_scale": _IGN_COUNTS,
+              "detection_threshold": 1.0 / _IGN_COUNTS, "power_noise": _POWER_NOISE, **fields}  # fmt: skip
     return Beam(name, source=source, **fields)
 
 

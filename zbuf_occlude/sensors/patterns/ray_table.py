@@ -26,7 +26,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.ray_tables import read_ray_table
 from zbuf_occlude.sensors.checks import MAX_SENSOR_RAYS, count, located, real, reals, replaced, sensor_name, text, value_kind
 from zbuf_occlude.sensors.beam.fields import IDEAL_BEAM, Beam, check_beam
-from zbuf_occlude.sensors.patterns.spinning import SPINNING_INTENSITY_SCALE, Lidar, beam_directions, in_sector
+from zbuf_occlude.sensors.patterns.spinning import Lidar, beam_directions, in_sector
 from zbuf_occlude.sensors.pulses import Pulses, placed
 
 __all__ = ["RAY_TABLE_FILE_BEAM", "RAY_TABLE_PRESETS", "ROSETTE_FOV_DEG", "ROSETTE_PRISM_HZ", "RayTable", "load_ray_table", "rosette_table"]
@@ -316,14 +316,17 @@ RAY_TABLE_FILE_BEAM = Beam(
 # prisms' rates: 121.567 and −77.733 revolutions per second (HELIOS++ commit eea12035, which
 # corrected the 7,294 and −4,664 of earlier versions: revolutions per minute).  The pattern is
 # :func:`rosette_table`'s first-order Risley model over one 0.1 s frame (10,000 pulses).
-# Intensity: the 8-bit reflectivity of Livox's point format (0–150 diffuse, 151–255
-# retroreflective), scaled as the spinning presets are (:data:`~zbuf_occlude.sensors.patterns.spinning.SPINNING_INTENSITY_SCALE`): an
-# ASSUMPTION.
+# Intensity: the 8-bit reflectivity of Livox's point format, 0–150 for reflectivities of 0–100 % in the Lambertian
+# model and 151–255 for retro-reflectors (Livox Mid-70 user manual v1.2, "Point Cloud Data"; the same in the Livox HAP
+# user manual, 2022): the calibrated reflectivity E · R² at 150 counts per unit, at most 255 (as the spinning presets,
+# :data:`~zbuf_occlude.sensors.patterns.spinning.SPINNING_INTENSITY_SCALE`).
+#: Counts per unit reflectance of a Livox unit's reflectivity (comment above).
+LIVOX_INTENSITY_SCALE = 150.0
 RAY_TABLE_PRESETS: dict[str, RayTable] = {
     "livox-mid70": rosette_table(
         10_000, duration_s=0.1, fov_deg=70.4, prism_hz=(121.567, -77.733), name="livox-mid70",
         beam=Beam("livox-mid70", wavelength_nm=905.0, divergence_deg=0.051, min_range_m=0.05, max_range_m=260.0, range_noise_m=0.02,
-                  detection_threshold=0.1 / 90.0**2, intensity_scale=SPINNING_INTENSITY_SCALE, max_intensity=255,
+                  detection_threshold=0.1 / 90.0**2, intensity_scale=LIVOX_INTENSITY_SCALE, max_intensity=255, intensity_unit="reflectivity",
                   source="Livox Mid-70 data sheet and user manual v1.2 (90 m at 10 %, precision 2 cm); divergence: HELIOS++ scanners_tls.xml"),
         source="Livox Mid-70 (Risley prisms at 121.567 and -77.733 Hz: HELIOS++ pyhelios/data/scanners_tls.xml, commit eea12035)",
     ),

@@ -205,20 +205,25 @@ _HDL64E = tuple(np.round(np.concatenate([2.0 - np.arange(32) / 3.0, -8.83 - 0.5 
 # 0.8 at 100 m is an ASSUMPTION by analogy with the HDL-64E S2.  Applied where a scan is given
 # reflectivities.
 #
-# Intensity: Velodyne and Ouster (Gen 1) sensors report an 8-bit calibrated reflectivity, 0–100
-# for diffuse targets (Velodyne HDL-32E manual 63-9113 Rev. D, "Calibrated reflectivities"), and
-# that is what their LAS exports hold (0–255).  A fixed scale cannot calibrate away the range, so
-# ``intensity_scale`` is chosen to give a diffuse target of ρ = 0.5 at 15 m (the median range of a
-# street scan) 50 counts: 50 / (0.5 / 15²) = 22,500 counts·m² (an ASSUMPTION: a scale, not a
-# calibration), and ``max_intensity`` 255.
-#: Counts·m² of the spinning presets' 8-bit intensities (comment above): an ASSUMPTION, a scale, not a calibration.
-SPINNING_INTENSITY_SCALE = 22_500.0
+# Intensity: a Velodyne writes an 8-bit *calibrated reflectivity*, "independent of laser power and distances":
+# diffuse reflectors 0–100 for reflectivities of 0–100 %, retro-reflectors 101–255, 255 an ideal one (VLP-16 user
+# manual 63-9243 Rev. D, §6.1 "Calibrated Reflectivity"; HDL-32E from firmware 2.0, Velodyne "HDL-32E Software Version
+# 2.0 Description", 2012).  Ouster firmware writes a calibrated reflectivity too, "measured signal photons scaled by
+# range and sensor sensitivity" (Ouster firmware user manual, "Calibrated Reflectivity"), 0–100 for Lambertian targets
+# (an ASSUMPTION for the Gen 1 OS1-64's firmware of 2019); the HDL-64E S2 calibrates each laser's intensity and is
+# given the same convention (an ASSUMPTION).  So the presets write the apparent reflectance E · R² = ρ |cos θ| s
+# (``intensity_unit`` "reflectivity") at 100 counts per unit, at most 255: a white wall met head-on reads 100 at 2 m and
+# at 50 m, a grazing or partial hit less, a retro-reflector (ρ > 1) above 100 (linearly, where the devices compress
+# that range: an ASSUMPTION).
+#: Counts per unit reflectance of the spinning presets' calibrated reflectivity (comment above).
+SPINNING_INTENSITY_SCALE = 100.0
 
 
 def _spinning_beam(name: str, **fields) -> Beam:
     """A spinning LiDAR preset's beam: 905 nm, one return per pulse (the firmware's strongest-return mode with
-    one ray), τ = 0.8 / 100² unless given, 8-bit intensities."""
-    fields = {"detection_threshold": 0.8 / 100.0**2, "intensity_scale": SPINNING_INTENSITY_SCALE, "max_intensity": 255, **fields}
+    one ray), τ = 0.8 / 100² unless given, an 8-bit calibrated reflectivity."""
+    fields = {"detection_threshold": 0.8 / 100.0**2, "intensity_scale": SPINNING_INTENSITY_SCALE, "max_intensity": 255,
+              "intensity_unit": "reflectivity", **fields}  # fmt: skip
     return Beam(name, wavelength_nm=905.0, **fields)
 
 

@@ -1,0 +1,48 @@
+"""An airborne preset out of the box: every echo it keeps reads at least one count, one surface's intensities spread as a
+real receiver's do, and an optic given alone leaves the other to the material table."""
+
+from __future__ import annotations
+
+import io
+
+import laspy
+import numpy as np
+import pytest
+
+import zbuf_occlude as zo
+from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
+
+
+def _las(scene, scanner, **optics) -> laspy.LasData:
+    s = scan_airborne(scene, scanner, (0.0, 0.0), 8.0, seed=2, **optics)
+    return laspy.read(io.BytesIO(s.to_las_bytes()))
+
+
+@pytest.fixture(scope="module")
+def plot():
+    """Flat ground and a box standing on it, as a scene."""
+    return zo.ScanScene(ground_half_extent_m=40.0).add({"box_m": [3.0, 3.0, 2.0]}, position_m=(2.0, 1.0), class_name="building")
+
+
+@pytest.mark.parametrize("name", ["riegl-q1560", "leica-als50-ii", "optech-galaxy"])
+def test_no_kept_echo_reads_zero_and_the_ground_spreads_as_a_receivers_do(plot, name: str) -> None:
+    las = _las(plot, airborne_preset(name))
+    intensity = np.asarray(las.intensity, np.float64)
+    assert len(las) > 400 and intensity.min() >= 1  # the detection floor: one count
+    ground = intensity[(np.asarray(las.classification) == 2) & (np.asarray(las.number_of_returns) == 1)]
+    p5, p95 = np.percentile(ground, [5, 95])
+    assert 1.85 <= p95 / p5 <= 5.55  # the IGN sample's single ground returns: 87 / 326, 3.7, ± 50 %
+
+
+def test_the_ideal_beam_keeps_one_value(plot) -> None:
+    """The spread is the presets' receiver, not the scene's: the ideal airborne beam has none."""
+    ideal = AirborneScanner("ideal-als", 58.0, 800_000.0, 209.0, 1300.0, 72.0)
+    s = scan_airborne(plot, ideal, (0.0, 0.0), 8.0, seed=2)
+    assert np.unique(s.intensity).size == 1
+
+
+def test_a_transmittance_given_alone_keeps_the_materials_reflectances(plot) -> None:
+    scanner = airborne_preset("riegl-q1560")
+    ground = lambda las: np.asarray(las.intensity)[(np.asarray(las.classification) == 2) & (np.asarray(las.number_of_returns) == 1)]  # noqa: E731
+    default, with_tau, rho_1 = (np.median(ground(_las(plot, scanner, **o))) for o in ({}, {"transmittance": 0.3}, {"reflectivity": None}))
+    assert with_tau == pytest.approx(default, rel=0.05) and rho_1 > 2.0 * default  # the soil's 0.33, not ρ = 1

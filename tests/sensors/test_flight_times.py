@@ -1,0 +1,95 @@
+"""A flight plan's lines are flown one after another, and the scan writes the trajectory that flew them."""
+
+from __future__ import annotations
+
+import math
+
+import laspy
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from zbuf_occlude.cli.main import main
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.sensors import airborne_preset
+from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_trajectory, line_length_m
+from zbuf_occlude.sensors.platform import load_trajectory
+from zbuf_occlude.sensors.scan_data import GPS_START_S
+
+BLOCK = airborne_preset("dales-q1560")
+
+
+def _pulses(scanner, center=(3.0, -2.0), half=6.0, seed=0):
+    return scanner.pulses(center, half, np.random.default_rng(seed))
+
+
+def test_a_blocks_lines_are_flown_one_after_another() -> None:
+    p = _pulses(BLOCK)
+    line = p.per_pulse_meta["line_id"]
+    length = line_length_m((3.0, -2.0), 6.0)
+    assert p.meta["line_length_m"] == length and np.all(p.time_s >= 0.0)
+    flown = length / BLOCK.speed_mps
+    ids = np.unique(line)
+    assert len(ids) >= 5  # the strips that cover the square (about 6 of the 9 lines, 216 m apart, 1,441 m wide)
+    for a, b in zip(ids[:-1], ids[1:]):
+        ta, tb = p.time_s[line == a], p.time_s[line == b]
+        assert ta.max() < tb.min()  # strictly ordered
+        assert tb.min() - ta.min() >= flown  # at least the line's length over the speed apart
+        assert tb.min() - ta.max() >= TURN_S  # the turn between them
+    starts = np.asarray(p.meta["line_start_s"])
+    assert np.allclose(np.diff(starts), flown + TURN_S, rtol=1e-12)
+
+
+def test_the_trajectory_flies_through_every_pulse_origin() -> None:
+    for scanner in (BLOCK, airborne_preset("riegl-q1560"), BLOCK.with_(headings_deg=(0.0, 90.0), n_lines=2)):
+        p = _pulses(scanner)
+        rotation, position = p.meta["trajectory"].poses_at(p.time_s)
+        assert np.max(np.abs(position - p.origins)) < 1e-6  # metres, at 1,300 m
+        line = p.per_pulse_meta["line_id"]
+        heading = np.radians(np.asarray(scanner.headings_deg)[line // scanner.n_lines])
+        assert np.allclose(rotation[:, :2, 0], np.column_stack([np.cos(heading), np.sin(heading)]), atol=1e-9)  # x along track
+
+
+def test_opposite_headings_are_joined_by_a_half_way_pose() -> None:
+    lines = BLOCK.with_(headings_deg=(0.0, 180.0), n_lines=1).flight_lines(0.0)
+    t = flown_trajectory(lines, 50.0, 1000.0, 50.0, 60.0)  # a half turn between the lines: the Trajectory would refuse it
+    mid = np.flatnonzero((t.time_s > 1.0) & (t.time_s < 61.0))
+    assert len(mid) == 1 and math.isclose(t.time_s[mid[0]], 31.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.1, 600.0), st.floats(-50.0, 50.0), st.floats(-50.0, 50.0), st.floats(1.0, 40.0))
+def test_line_times_follow_the_plan_for_any_turn_and_square(turn_s: float, cx: float, cy: float, half: float) -> None:
+    scanner = BLOCK.with_(turn_s=turn_s, n_lines=3)
+    p = _pulses(scanner, (cx, cy), half)
+    if len(p.time_s) == 0:
+        return
+    length = line_length_m((cx, cy), half)
+    line = p.per_pulse_meta["line_id"]
+    start = line * (length / scanner.speed_mps + turn_s)
+    assert np.all(p.time_s >= start - 1e-9) and np.all(p.time_s <= start + length / scanner.speed_mps + 1e-9)
+
+
+@pytest.mark.parametrize("turn", [0.0, -1.0, math.nan, "2", 1e9])
+def test_a_bad_turn_time_is_refused_naming_it(turn) -> None:
+    with pytest.raises(InvalidInputError, match="turn_s"):
+        BLOCK.with_(turn_s=turn)
+
+
+def test_the_scan_command_writes_the_trajectory_read_back_as_flown(tmp_path, capsys) -> None:
+    chair = "data/samples/chair/train/chair_0001.off"
+    out = tmp_path / "air"
+    assert main(["scan", chair, "--sensor", "dales-q1560", "--size", "3", "--format", "las", "--no-progress", "--out", str(out)]) == 0
+    (las_path,) = out.glob("*.las")
+    (csv_path,) = out.glob("*_trajectory.csv")
+    assert "wrote 2 files" in capsys.readouterr().out
+    las, trajectory = laspy.read(las_path), load_trajectory(csv_path)
+    t = np.asarray(las.gps_time)
+    assert t.min() >= GPS_START_S and trajectory.start_s == GPS_START_S
+    # every return lies below the aircraft's position at its pulse's time, along its beam: within the swath, at altitude
+    _, position = trajectory.poses_at(t)
+    assert np.all(position[:, 2] == BLOCK.altitude_m)
+    xy = np.column_stack([np.asarray(las.x), np.asarray(las.y)])
+    across = np.abs(xy[:, 1] - position[:, 1])
+    assert np.all(np.abs(xy[:, 0] - position[:, 0]) < 0.5) and np.all(across <= BLOCK.swath_width_m / 2.0)
