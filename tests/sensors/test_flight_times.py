@@ -93,3 +93,36 @@ def test_the_scan_command_writes_the_trajectory_read_back_as_flown(tmp_path, cap
     xy = np.column_stack([np.asarray(las.x), np.asarray(las.y)])
     across = np.abs(xy[:, 1] - position[:, 1])
     assert np.all(np.abs(xy[:, 0] - position[:, 0]) < 0.5) and np.all(across <= BLOCK.swath_width_m / 2.0)
+
+
+def test_the_origin_option_puts_the_points_where_the_crs_says(tmp_path, capsys) -> None:
+    """A scene made about its origin, written with ``--crs EPSG:2154 --origin E,N,H``: laspy reads the points at their world
+    positions plus the origin, in Lambert-93 (their geographic position inside France), and the trajectory beside them too."""
+    pytest.importorskip("pyproj")
+    from pyproj import Transformer
+
+    chair, origin = "data/samples/chair/train/chair_0001.off", (652_000.0, 6_862_000.0, 35.0)  # Paris in Lambert-93
+    common = ["scan", chair, "--sensor", "riegl-q1560", "--size", "3", "--format", "las", "--no-progress", "--seed", "1"]
+    assert main([*common, "--out", str(tmp_path / "local")]) == 0
+    assert main([*common, "--crs", "EPSG:2154", "--origin", ",".join(map(str, origin)), "--out", str(tmp_path / "placed")]) == 0
+    (local,), (placed,) = (sorted((tmp_path / d).glob("*.las")) for d in ("local", "placed"))
+    a, b = laspy.read(local), laspy.read(placed)
+    xyz = lambda las: np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])  # noqa: E731
+    assert np.allclose(xyz(b), xyz(a) + origin, atol=1.5e-3)  # 1 mm steps in each file
+    assert b.header.parse_crs().to_epsg() == 2154
+    lon, lat = Transformer.from_crs(2154, 4326, always_xy=True).transform(float(np.mean(b.x)), float(np.mean(b.y)))
+    assert 2.2 < lon < 2.5 and 48.7 < lat < 49.0  # Paris, not the Atlantic
+    # the trajectory in the same coordinates (read as a table: load_trajectory reads a scene's frame, within ±16.8 km)
+    ta, tb = (np.loadtxt(next((tmp_path / d).glob("*_trajectory.csv")), delimiter=",", skiprows=1) for d in ("local", "placed"))
+    assert np.allclose(tb[:, 1:4], ta[:, 1:4] + origin, atol=1e-6) and np.array_equal(tb[:, [0, 4, 5, 6]], ta[:, [0, 4, 5, 6]])
+
+
+def test_an_origin_needs_the_world_frame_and_good_numbers(tmp_path, capsys) -> None:
+    common = ["scan", "box", "--format", "las", "--no-progress", "--out", str(tmp_path / "o")]
+    assert main([*common, "--sensor", "hdl32e", "--origin", "1,2"]) == 2
+    assert "--origin places the world frame's origin: it needs --frame world" in capsys.readouterr().err
+    for bad, says in (("1,2,3,4", "2 or 3"), ("nan,1", "finite"), ("1e9,0", "finite number in"), ("abc", "E,N or E,N,H")):
+        assert main([*common, "--sensor", "riegl-q1560", "--origin", bad]) == 2
+        assert says in capsys.readouterr().err
+    assert main(["scan", "box", "--sensor", "riegl-q1560", "--no-progress", "--origin", "1,2", "--out", str(tmp_path / "n")]) == 2
+    assert "--origin fills LAS/LAZ files" in capsys.readouterr().err

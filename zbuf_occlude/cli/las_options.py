@@ -1,4 +1,4 @@
-"""``--crs``, ``--class-map`` and ``--gps-start``: the survey fields of the LAS/LAZ files a command writes.
+"""``--crs``, ``--origin``, ``--class-map`` and ``--gps-start``: the survey fields of the LAS/LAZ files a command writes.
 
 :func:`add_las_arguments` adds the options; each is checked while the command line is parsed
 (:class:`~zbuf_occlude.cli.options.Checked`: a class map file is read and checked then, before
@@ -19,11 +19,12 @@ from zbuf_occlude.sensors.request import LAS_FORMATS
 from zbuf_occlude.sensors.scan_data import GPS_START_S
 
 __all__ = [
-    "LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "check_gps_start_option", "las_keywords",
+    "LAS_FORMATS", "LAS_OPTIONS", "add_las_arguments", "check_class_map_option", "check_crs_option", "check_gps_start_option",
+    "check_origin_option", "las_keywords",
 ]  # fmt: skip
 
 #: The options of :func:`add_las_arguments`: ``args`` attribute → option.
-LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps-start"}
+LAS_OPTIONS = {"crs": "--crs", "class_map": "--class-map", "gps_start_s": "--gps-start", "origin_m": "--origin"}
 
 
 def check_crs_option(text: str, option: str) -> str:
@@ -81,8 +82,27 @@ def check_class_map_option(text: str, option: str) -> dict[str, int]:
         raise InvalidInputError(f"{option} {exc}") from None
 
 
+def check_origin_option(text: str, option: str) -> tuple[float, ...]:
+    """``--origin E,N[,H]``: the world frame's origin in the file's coordinates, metres
+    (:func:`~zbuf_occlude.sensors.scan_data.las_origin`'s rule).
+
+    Raises
+    ------
+    InvalidInputError
+        Not 2 or 3 comma-separated finite numbers within the bound, naming ``option``.
+    """
+    from zbuf_occlude.sensors.scan_data import las_origin
+
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        raise InvalidInputError(f"{option} must be E,N or E,N,H in metres, got {text!r:.60}") from None
+    return tuple(float(v) for v in las_origin(values, option)[: len(values)])
+
+
 def add_las_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--crs``, ``--class-map`` and ``--gps-start`` (docs/guide/las_fields.md) to ``parser``."""
+    """Add ``--crs``, ``--origin``, ``--class-map`` and ``--gps-start`` (docs/guide/las_fields.md) to ``parser``."""
     g = parser.add_argument_group(
         "LAS/LAZ fields (--format las or laz)",
         "ASPRS classes, object ids and class names, flight lines, intensity counts and adjusted standard GPS time are "
@@ -94,6 +114,12 @@ def add_las_arguments(parser: argparse.ArgumentParser) -> None:
         "(EPSG:32633), or of one compound with a vertical CRS in metres (EPSG:2154+5720, EPSG:7415); geographic, geocentric, "
         "vertical-only and feet CRSs are refused (the points are metres on a plane, written unconverted); needs --frame world "
         "(airborne scans are) and pyproj (the crs extra) (default: none)",
+    )  # fmt: skip
+    g.add_argument(
+        "--origin", metavar="E,N[,H]", dest="origin_m", action=Checked, check=check_origin_option, default=None,
+        help="where the scene's origin lies in the file's coordinates, metres (a CRS's easting, northing and height, "
+        "e.g. --crs EPSG:2154 --origin 652000,6862000,35): every point and the trajectory are written at their world "
+        "position plus it; needs --frame world (airborne scans are) (default: the scene's own coordinates)",
     )  # fmt: skip
     g.add_argument(
         "--class-map", metavar="FILE", action=Checked, check=check_class_map_option, default=None,
@@ -127,4 +153,4 @@ def las_keywords(args: argparse.Namespace, formats: Sequence[str]) -> dict[str, 
         for attr, option in LAS_OPTIONS.items():
             if attr in given:
                 raise InvalidInputError(f"{option} fills LAS/LAZ files: it needs --format las or laz, not {', '.join(formats)}")
-    return {"crs": args.crs, "class_map": args.class_map, "gps_start_s": args.gps_start_s}
+    return {"crs": args.crs, "class_map": args.class_map, "gps_start_s": args.gps_start_s, "origin_m": args.origin_m}

@@ -34,7 +34,7 @@ SCAN_OPTION_FIELDS = {
     **{field: "--" + dest.replace("_", "-") for dest, field in BEAM_OPTIONS.items()}, "footprint_rays": "--footprint",
     "footprint_cast": "--footprint-cast", "backend": "--backend", "frame": "--frame", "reflectance_table": "--reflectance-table",
     "transmittance": "--transmittance", "reflectivity": "--reflectivity", "trajectory": "--trajectory", "samples": "--samples",
-    "format": "--format", "gps_start_s": "--gps-start", "crs": "--crs", "crop": "--crop",
+    "format": "--format", "gps_start_s": "--gps-start", "crs": "--crs", "origin_m": "--origin", "crop": "--crop",
 }  # fmt: skip
 #: The crop options among them, by field, whose name ``scan`` records as typed (``--footprint`` or ``--sensor-footprint``).
 _CROP_FIELDS = {"footprint": "footprint", "footprint_rays": "footprint", "divergence_deg": "divergence_deg", "reflectivity": "reflectivity"}

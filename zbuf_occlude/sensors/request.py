@@ -195,7 +195,7 @@ class ScanRequest:
         self._check_trajectory(kind)
         if set(self.formats) & set(LAS_FORMATS):
             moving = self.trajectory is not None and not self.trajectory.is_static
-            check_las_frame(self.frame, moving=moving, crs=self.las.get("crs"), names=self.names)
+            check_las_frame(self.frame, moving=moving, crs=self.las.get("crs"), origin_m=self.las.get("origin_m"), names=self.names)
         cast = "auto" if self.footprint_cast is None else self.footprint_cast
         if kind.pulsed:
             from zbuf_occlude.sensors.beam.adaptive_cast import check_footprint_cast

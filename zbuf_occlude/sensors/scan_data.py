@@ -20,9 +20,10 @@ from zbuf_occlude.io.atomic import write_bytes
 from zbuf_occlude.io.caps import MAX_SCAN_NPZ_BYTES
 from zbuf_occlude.io.encodings import npz_bytes
 from zbuf_occlude.sensors.beam.fields import INTENSITY_UNITS, device_quantity, intensity_counts
-from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, namer
+from zbuf_occlude.sensors.checks import MAX_SCENE_OBJECTS, namer, reals
 
-__all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start", "read_scan_npz"]
+__all__ = ["FRAMES", "GPS_START_S", "GPS_TIME_RESOLUTION_S", "MAX_LAS_ORIGIN_M", "UNIT_INTENSITY_SCALE", "Scan", "check_gps_start",
+           "las_origin", "read_scan_npz"]  # fmt: skip
 
 #: Frames a scan's points can be given in.
 FRAMES = ("sensor", "world")
@@ -41,20 +42,24 @@ GPS_START_S = 451_260_818.0
 #: distinct times in firing order.  A finer rule (0.1 µs) would refuse real adjusted standard times
 #: from 2028 on (2²⁹ s), which are as LAS writes them.
 GPS_TIME_RESOLUTION_S = 1e-6
+#: Largest |coordinate| of a LAS file's origin (``to_las_bytes(origin_m=)``), metres: every projected CRS's false
+#: eastings and northings (UTM's 10,000 km, Lambert-93's 7,000 km) lie well within it, and float64 keeps nm steps there.
+MAX_LAS_ORIGIN_M = 1e8
 #: The intensity scale of a scan whose beam gives none, counts·m²: received energy 1 m⁻² (a white
 #: Lambertian target at normal incidence 1 m away, filling the beam) and above store 65535.
 UNIT_INTENSITY_SCALE = 65535.0
 
 
-def check_las_frame(frame: str, *, moving: bool, crs=None, names: Mapping[str, str | None] | None = None) -> None:
+def check_las_frame(frame: str, *, moving: bool, crs=None, origin_m=None, names: Mapping[str, str | None] | None = None) -> None:
     """The one statement of the frames a LAS file takes: a moving sensor's points in the sensor frame lie each in its own
-    pulse's frame, which no one height above the ground classifies; a CRS labels world coordinates.  ``names`` maps
-    ``frame`` and ``crs`` to the caller's words (:func:`~zbuf_occlude.sensors.beam.fields.check_returns`'s rule).
+    pulse's frame, which no one height above the ground classifies; a CRS labels world coordinates, and an origin places
+    them.  ``names`` maps ``frame``, ``crs`` and ``origin_m`` to the caller's words
+    (:func:`~zbuf_occlude.sensors.beam.fields.check_returns`'s rule).
 
     Raises
     ------
     InvalidInputError
-        Either, in the sensor frame.
+        Any of them in the sensor frame.
     """
     n = namer(names)
     if frame != "world" and moving:
@@ -64,6 +69,22 @@ def check_las_frame(frame: str, *, moving: bool, crs=None, names: Mapping[str, s
         raise InvalidInputError(
             f"{n('crs')} {crs} labels world coordinates: it needs {n('frame')} world (the points are in the {frame} frame)"
         )
+    if origin_m is not None and frame != "world":
+        raise InvalidInputError(f"{n('origin_m')} places the world frame's origin: it needs {n('frame')} world (the points are in "
+                                f"the {frame} frame)")  # fmt: skip
+
+
+def las_origin(origin_m, name: str = "origin_m") -> NDArray[np.float64]:
+    """(3,) float64: ``origin_m``, the world frame's origin in the coordinates a LAS file is written in (a CRS's easting,
+    northing and height, metres): 2 or 3 finite numbers within ±:data:`MAX_LAS_ORIGIN_M` (a height of 0 where 2 are given).
+
+    Raises
+    ------
+    InvalidInputError
+        Another count, or a number not finite or beyond the bound, naming ``name``.
+    """
+    values = reals(origin_m, name, lengths=(2, 3), low=-MAX_LAS_ORIGIN_M, high=MAX_LAS_ORIGIN_M)
+    return np.array([*values, 0.0][:3], dtype=np.float64)
 
 
 def check_gps_start(gps_start_s: float, times_s: ArrayLike | None = None, *, name: str = "gps_start_s") -> float:
@@ -301,6 +322,7 @@ class Scan:
         scan_number: int = 0,
         gps_start_s: float = GPS_START_S,
         crs: int | str | None = None,
+        origin_m=None,
     ) -> bytes:
         """The scan as the bytes of a LAS 1.4 file, point format 6 (LAZ with ``compress``), as a survey writes it.
 
@@ -353,6 +375,10 @@ class Scan:
             a vertical CRS in metres (``"EPSG:2154+5720"``;
             :func:`~zbuf_occlude.io.las_crs.epsg_crs`), written as a WKT VLR; needs pyproj (the
             ``crs`` extra) and a scan in the world frame.
+        origin_m : (2,) or (3,) float, optional
+            Where the world frame's origin lies in the file's coordinates (a CRS's easting, northing and height, metres;
+            :func:`las_origin`): every point is written at its world position plus it, so that a scene made about the
+            origin lands where the CRS says.  Needs a scan in the world frame.
 
         Returns
         -------
@@ -363,7 +389,7 @@ class Scan:
         Raises
         ------
         InvalidInputError
-            ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a
+            ``intensity_scale``, ``ground_z_m`` or ``gps_start_s`` not finite (scale > 0), a bad ``origin_m``, a
             :attr:`max_intensity` outside 1 to 65535, a time that would be negative or whose
             float64 steps are coarser than :data:`GPS_TIME_RESOLUTION_S`, ``scan_number`` out of
             range, an object id beyond :attr:`object_classes`, a bad class map, ``crs`` on a scan
@@ -382,7 +408,8 @@ class Scan:
         ground = real(ground_z_m, "ground_z_m")
         source = count(scan_number, "scan_number", low=0, high=65535)
         top = 65535 if self.max_intensity is None else count(self.max_intensity, "max_intensity", low=1, high=65535)
-        check_las_frame(self.frame, moving=bool(self.meta.get("moving")), crs=crs)
+        check_las_frame(self.frame, moving=bool(self.meta.get("moving")), crs=crs, origin_m=origin_m)
+        origin = np.zeros(3) if origin_m is None else las_origin(origin_m)
         n = len(self)
         ones = np.ones(n, np.uint8)
         intensity = np.zeros(n, np.uint16)
@@ -401,7 +428,7 @@ class Scan:
         line = self.meta.get("line_id")
         flight_lines = line is not None and np.shape(line) == (n,)
         return las_bytes(
-            points, intensity=intensity,
+            points + origin, intensity=intensity,
             return_number=ones if self.return_number is None else self.return_number,
             number_of_returns=ones if self.number_of_returns is None else self.number_of_returns,
             gps_time=times,

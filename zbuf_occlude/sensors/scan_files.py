@@ -23,7 +23,7 @@ from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
 from zbuf_occlude.sensors.platform import EULER_COLUMNS, Trajectory
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
-from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
+from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start, las_origin
 
 __all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "TRAJECTORY_SUFFIX", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
            "scan_scene_file"]  # fmt: skip
@@ -60,8 +60,10 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     keywords, ``ground_z_m`` and ``number`` modulo 65,536 as its point source id where it has no flight lines.
     A scan whose platform flew a trajectory of its own (``scan.meta["trajectory"]``: an airborne scanner's flight,
     :mod:`~zbuf_occlude.sensors.patterns.flight_times`) written as LAS or LAZ also writes it, ``<stem>_trajectory.csv``
-    (:data:`~zbuf_occlude.sensors.platform.EULER_COLUMNS`, read back by :func:`~zbuf_occlude.sensors.platform.load_trajectory`),
-    its times on the LAS files' clock: the scan's own plus the request's ``gps_start_s``.
+    (:data:`~zbuf_occlude.sensors.platform.EULER_COLUMNS`, read back by :func:`~zbuf_occlude.sensors.platform.load_trajectory`
+    where it lies in the scene's frame, without ``origin_m``),
+    its times and positions those of the LAS files: the scan's times plus the request's ``gps_start_s``, its positions
+    plus the request's ``origin_m``.
 
     Raises
     ------
@@ -83,7 +85,10 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
         files.append(folder.root / f"{stem}.{fmt}")
     trajectory = scan.meta.get("trajectory")
     if isinstance(trajectory, Trajectory) and set(request.formats) & set(LAS_FORMATS):  # a survey's LAS comes with its trajectory
-        folder.write_bytes(stem + TRAJECTORY_SUFFIX, trajectory_csv_bytes(EULER_COLUMNS, trajectory.euler_table(start)))
+        table = trajectory.euler_table(start)
+        if request.las.get("origin_m") is not None:  # the LAS file's coordinates
+            table[:, 1:4] += las_origin(request.las["origin_m"])
+        folder.write_bytes(stem + TRAJECTORY_SUFFIX, trajectory_csv_bytes(EULER_COLUMNS, table))
         files.append(folder.root / (stem + TRAJECTORY_SUFFIX))
     return tuple(files)
 
