@@ -199,12 +199,20 @@ def test_transmittance_reaches_a_mesh_scan(tmp_path: Path, capsys) -> None:
 
 
 def test_surface_optics_reach_an_airborne_scan(tmp_path: Path, capsys) -> None:
-    # --transmittance 0 gives the scan its optics (opaque everywhere, ρ 1): the airborne default (the table's materials) stands aside
+    import zbuf_occlude as zo
+    from zbuf_occlude.sensors import airborne_preset, scan_airborne
+
+    # --transmittance 0 alone keeps the airborne default's reflectances (the table's materials), as --reflectance-table gives them
     plain = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "0"], tmp_path / "plain", capsys)
     table = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "0", "--reflectance-table"], tmp_path / "table", capsys)
     through = _scan([str(STREET), "--sensor", "riegl-q1560", "--transmittance", "car=0.5"], tmp_path / "through", capsys)
     ground = lambda s: (s.object_id == 0) & (s.number_of_returns == 1)  # noqa: E731 - one echo: its energy alone
-    ratio = np.median(table.intensity[ground(table)]) / np.median(plain.intensity[ground(plain)])
+    assert np.array_equal(plain.intensity, table.intensity)
+    # against ρ = 1 (the library's reflectivity=None): the ground's reflectance at 1064 nm
+    scene = zo.load_scene(STREET)
+    rho_1 = scan_airborne(scene, airborne_preset("riegl-q1560"), (0.0, 0.0), scene.ground_half_extent_m, seed=0, reflectivity=None,
+                          transmittance=0.0)  # fmt: skip
+    ratio = np.median(table.intensity[ground(table)]) / np.median(rho_1.intensity[ground(rho_1)])
     assert ratio == pytest.approx(reflectance(GROUND_MATERIAL, 1064.0), rel=0.05)
     under_car = [int(np.sum((s.object_id == 0) & (s.return_number > 1))) for s in (plain, through)]
     assert under_car[1] > under_car[0]  # the ground under the car, through it
