@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors import airborne_preset
-from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_trajectory, line_length_m
-from zbuf_occlude.sensors.platform import load_trajectory
+from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_poses, line_length_m
+from zbuf_occlude.sensors.platform import Trajectory, load_trajectory
 from zbuf_occlude.sensors.scan_data import GPS_START_S
 
 BLOCK = airborne_preset("dales-q1560")
@@ -44,7 +44,7 @@ def test_a_blocks_lines_are_flown_one_after_another() -> None:
 def test_the_trajectory_flies_through_every_pulse_origin() -> None:
     for scanner in (BLOCK, airborne_preset("riegl-q1560"), BLOCK.with_(headings_deg=(0.0, 90.0), n_lines=2)):
         p = _pulses(scanner)
-        rotation, position = p.meta["trajectory"].poses_at(p.time_s)
+        rotation, position = Trajectory(*p.meta["flight"]).poses_at(p.time_s)
         assert np.max(np.abs(position - p.origins)) < 1e-6  # metres, at 1,300 m
         line = p.per_pulse_meta["line_id"]
         heading = np.radians(np.asarray(scanner.headings_deg)[line // scanner.n_lines])
@@ -53,7 +53,7 @@ def test_the_trajectory_flies_through_every_pulse_origin() -> None:
 
 def test_opposite_headings_are_joined_by_a_half_way_pose() -> None:
     lines = BLOCK.with_(headings_deg=(0.0, 180.0), n_lines=1).flight_lines(0.0)
-    t = flown_trajectory(lines, 50.0, 1000.0, 50.0, 60.0)  # a half turn between the lines: the Trajectory would refuse it
+    t = Trajectory(*flown_poses(lines, 50.0, 1000.0, 50.0, 60.0))  # a half turn between the lines: the Trajectory would refuse it
     mid = np.flatnonzero((t.time_s > 1.0) & (t.time_s < 61.0))
     assert len(mid) == 1 and math.isclose(t.time_s[mid[0]], 31.0)
 

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
 from zbuf_occlude.io.caps import MAX_TRAJECTORY_POSES
-from zbuf_occlude.io.trajectories import read_trajectory_table
+from zbuf_occlude.io.trajectories import read_trajectory_table, trajectory_csv_bytes
 from zbuf_occlude.sensors.checks import MAX_COORDINATE_M, located, real, reals, sensor_name, value_kind
 
 __all__ = ["EULER_COLUMNS", "HALF_TURN_DEG", "HALF_TURN_SLACK_DEG", "MAX_TIME_S", "QUATERNION_COLUMNS", "QUATERNION_NORM_TOLERANCE",
@@ -238,13 +238,16 @@ class Trajectory:
         rotation = Slerp(self.time_s[window], Rotation.from_matrix(self.rotation[window]))(t).as_matrix()
         return rotation, position
 
-    def euler_table(self, time_offset_s: float = 0.0) -> NDArray[np.float64]:
-        """(T, 7) float64: the rows of :data:`EULER_COLUMNS` that :func:`load_trajectory` reads back to these poses, times
-        plus ``time_offset_s``; each angle column unwrapped (179 then 181, not 179 then -179), as the reader wants."""
+    def csv_bytes(self, time_offset_s: float = 0.0, position_offset_m=(0.0, 0.0, 0.0)) -> bytes:
+        """The trajectory as a CSV of :data:`EULER_COLUMNS` that :func:`load_trajectory` reads back to these poses
+        (:func:`~zbuf_occlude.io.trajectories.trajectory_csv_bytes`), times plus ``time_offset_s`` (seconds) and positions
+        plus ``position_offset_m`` ((3,) metres: another frame's coordinates); each angle column unwrapped (179 then 181,
+        not 179 then -179), as the reader wants."""
         from scipy.spatial.transform import Rotation
 
         angles = np.degrees(np.unwrap(np.radians(Rotation.from_matrix(self.rotation).as_euler("xyz", degrees=True)), axis=0))
-        return np.column_stack([self.time_s + float(time_offset_s), self.position_m, angles])
+        offset = np.asarray(position_offset_m, dtype=np.float64).reshape(3)
+        return trajectory_csv_bytes(EULER_COLUMNS, np.column_stack([self.time_s + float(time_offset_s), self.position_m + offset, angles]))
 
     def since(self, start_s: float, until_s: float | None = None) -> Trajectory:
         """The trajectory from ``start_s`` on: the pose there (:meth:`poses_at`), then the samples after it.

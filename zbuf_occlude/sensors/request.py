@@ -25,7 +25,7 @@ from zbuf_occlude.sensors.raycast.embree import BACKENDS
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
 from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import SensorKind, capabilities, sensor_from_name, with_beam
-from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame
+from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame, las_origin
 
 __all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "SCAN_FORMATS", "ScanRequest", "beam_changes"]
 
@@ -117,7 +117,7 @@ class ScanRequest:
         The output's file formats (``"las"`` and ``"laz"``: :data:`LAS_FORMATS`).
     las : mapping of str to value
         The LAS/LAZ files' keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` (``crs``, ``class_map``,
-        ``gps_start_s``).
+        ``gps_start_s``, ``origin_m``: held checked, as 3 numbers).
     names : mapping of str to str
         The caller's name of each field, for messages (module docstring); ``"sensor"`` how it named the sensor.
 
@@ -196,6 +196,8 @@ class ScanRequest:
         if set(self.formats) & set(LAS_FORMATS):
             moving = self.trajectory is not None and not self.trajectory.is_static
             check_las_frame(self.frame, moving=moving, crs=self.las.get("crs"), origin_m=self.las.get("origin_m"), names=self.names)
+            if self.las.get("origin_m") is not None:  # checked once: the files and the trajectory beside them add it as it is
+                object.__setattr__(self, "las", {**self.las, "origin_m": tuple(las_origin(self.las["origin_m"], n("origin_m")).tolist())})
         cast = "auto" if self.footprint_cast is None else self.footprint_cast
         if kind.pulsed:
             from zbuf_occlude.sensors.beam.adaptive_cast import check_footprint_cast

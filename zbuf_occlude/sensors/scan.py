@@ -303,8 +303,10 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     reflectivity, transmittance = (fill if a else v for a, v in zip(auto, (reflectivity, transmittance)))
     rng = np.random.default_rng(seed)
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
-    return fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
-                       optics=(reflectivity, transmittance), footprint=footprint)  # fmt: skip
+    s = fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
+                    optics=(reflectivity, transmittance), footprint=footprint)  # fmt: skip
+    s.meta["trajectory"] = Trajectory(*s.meta.pop("flight"), name=scanner.name)
+    return s
 
 
 def fire_pulses(

@@ -17,13 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.io.trajectories import trajectory_csv_bytes
 from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
 from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
-from zbuf_occlude.sensors.platform import EULER_COLUMNS, Trajectory
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
-from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start, las_origin
+from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
 
 __all__ = ["FLAT_SHARE", "PRIMITIVES", "SCAN_FILE_NAMES", "TRAJECTORY_SUFFIX", "WrittenScan", "placed_object", "run_scan", "save_scan", "scan_object",
            "scan_scene_file"]  # fmt: skip
@@ -63,7 +61,7 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     (:data:`~zbuf_occlude.sensors.platform.EULER_COLUMNS`, read back by :func:`~zbuf_occlude.sensors.platform.load_trajectory`
     where it lies in the scene's frame, without ``origin_m``),
     its times and positions those of the LAS files: the scan's times plus the request's ``gps_start_s``, its positions
-    plus the request's ``origin_m``.
+    plus the request's ``origin_m`` (:meth:`~zbuf_occlude.sensors.platform.Trajectory.csv_bytes`).
 
     Raises
     ------
@@ -84,11 +82,8 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
                 getattr(scan, f"to_{fmt}")(tmp)
         files.append(folder.root / f"{stem}.{fmt}")
     trajectory = scan.meta.get("trajectory")
-    if isinstance(trajectory, Trajectory) and set(request.formats) & set(LAS_FORMATS):  # a survey's LAS comes with its trajectory
-        table = trajectory.euler_table(start)
-        if request.las.get("origin_m") is not None:  # the LAS file's coordinates
-            table[:, 1:4] += las_origin(request.las["origin_m"])
-        folder.write_bytes(stem + TRAJECTORY_SUFFIX, trajectory_csv_bytes(EULER_COLUMNS, table))
+    if trajectory is not None and set(request.formats) & set(LAS_FORMATS):  # a survey's LAS comes with its trajectory
+        folder.write_bytes(stem + TRAJECTORY_SUFFIX, trajectory.csv_bytes(start, request.las.get("origin_m") or (0.0, 0.0, 0.0)))
         files.append(folder.root / (stem + TRAJECTORY_SUFFIX))
     return tuple(files)
 

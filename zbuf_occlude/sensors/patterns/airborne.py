@@ -69,7 +69,7 @@ from zbuf_occlude.sensors.checks import (
     sensor_name,
     text,
 )
-from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_trajectory, line_length_m, line_start_s
+from zbuf_occlude.sensors.patterns.flight_times import TURN_S, flown_poses, line_length_m, line_start_s
 from zbuf_occlude.sensors.pulses import Pulses
 
 __all__ = ["AIRBORNE_IDEAL_BEAM", "MAX_FLIGHT_LINES", "AirborneScanner", "FlightLine"]
@@ -349,7 +349,8 @@ class AirborneScanner:
             +x); per point in ``meta``: ``scan_angle_deg`` (the angle θ, +y side positive) and
             ``line_id``; the beam's detection threshold applies with ρ = 1 where no reflectivity
             is given; in ``meta`` also ``line_length_m`` (L), ``line_start_s`` (per line, by id) and
-            ``trajectory``, the aircraft's :class:`~zbuf_occlude.sensors.platform.Trajectory` on that clock.
+            ``flight``, the aircraft's poses on that clock (:func:`~zbuf_occlude.sensors.patterns.flight_times.flown_poses`:
+            the samples of a :class:`~zbuf_occlude.sensors.platform.Trajectory`).
 
         Raises
         ------
@@ -398,7 +399,7 @@ class AirborneScanner:
             origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
         meta = {"phase_s": phases[0], "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts),
                 "line_length_m": length, "line_start_s": tuple(line_start_s(range(n_total), length, scanner.speed_mps, scanner.turn_s)),
-                "trajectory": flown_trajectory(lines, length, scanner.altitude_m, scanner.speed_mps, scanner.turn_s, name=scanner.name)}  # fmt: skip
+                "flight": flown_poses(lines, length, scanner.altitude_m, scanner.speed_mps, scanner.turn_s)}  # fmt: skip
         return Pulses(
             directions, directions, origins, None, pulse_id=np.arange(len(origins), dtype=np.int64), time_s=fired,
             scan_angle_deg=(-angle).astype(np.float32), per_pulse_meta={"scan_angle_deg": angle, "line_id": line_id}, meta=meta,

@@ -9,9 +9,9 @@ seconds after the first, L the length each line is flown (:func:`line_length_m`)
 the time between one line's end and the next line's start (the turn and the run-in; ``AirborneScanner.turn_s``).  Along
 its line the aircraft is at ``−L/2`` (in the line's frame, x along track) at ``T_i`` and at ``+L/2`` at ``T_i + L/v``, so
 every time of a scan is ≥ 0 and a later line's times all follow an earlier line's.  The turns are not modelled: the
-trajectory (:func:`flown_trajectory`) holds the straight, level lines, and between two lines whose headings differ by a
+flight's poses (:func:`flown_poses`) hold the straight, level lines, and between two lines whose headings differ by a
 quarter turn or more, one pose half way in time, position and heading (a :class:`~zbuf_occlude.sensors.platform.Trajectory`
-turns the short way between samples).
+of them turns the short way between samples).
 """
 
 from __future__ import annotations
@@ -21,9 +21,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.sensors.platform import Trajectory
-
-__all__ = ["TURN_S", "flown_trajectory", "line_length_m", "line_start_s"]
+__all__ = ["TURN_S", "flown_poses", "line_length_m", "line_start_s"]
 
 #: Seconds between the end of one flight line and the start of the next: a fixed-wing survey aircraft's procedure turn
 #: and run-in take a few minutes (an ASSUMPTION: two minutes, a 180° turn at a standard rate of 3°/s plus the run-in).
@@ -45,15 +43,19 @@ def line_start_s(line_id, length_m: float, speed_mps: float, turn_s: float) -> N
     return np.asarray(line_id, dtype=np.float64) * (float(length_m) / float(speed_mps) + float(turn_s))
 
 
-def flown_trajectory(lines, length_m: float, altitude_m: float, speed_mps: float, turn_s: float, *, name: str = "flight") -> Trajectory:
+def flown_poses(lines, length_m: float, altitude_m: float, speed_mps: float, turn_s: float) -> tuple[NDArray[np.float64], ...]:
     """The aircraft's poses flying ``lines`` (:class:`~zbuf_occlude.sensors.patterns.airborne.FlightLine`, in flight
     order) one after another (module docstring): samples every :data:`SAMPLE_STEP_S` along each line and at its two
     ends, at ``altitude_m``, the sensor frame's x along the line, y to its left, z up.
 
     Returns
     -------
-    Trajectory
-        Times on the scan's clock (line 0 starts at 0), world frame, metres.
+    time_s : (T,) float64
+        On the scan's clock (line 0 starts at 0), strictly increasing.
+    position_m : (T, 3) float64
+        World frame, metres.
+    rotation : (T, 3, 3) float64
+        Sensor → world: a :class:`~zbuf_occlude.sensors.platform.Trajectory`'s samples.
     """
     duration = float(length_m) / float(speed_mps)
     times, positions, rotations = [], [], []
@@ -75,7 +77,7 @@ def flown_trajectory(lines, length_m: float, altitude_m: float, speed_mps: float
         positions.append(np.column_stack([xy, np.full(len(steps), float(altitude_m))]))
         rotations.append(np.repeat(rotation[None], len(steps), axis=0))
         previous = (start + duration, xy[-1], line.heading_deg)
-    return Trajectory(np.concatenate(times), np.concatenate(positions), np.concatenate(rotations), name=name)
+    return np.concatenate(times), np.concatenate(positions), np.concatenate(rotations)
 
 
 def _turn_deg(from_deg: float, to_deg: float) -> float:
