@@ -321,7 +321,8 @@ def test_an_airborne_scan_takes_the_material_table_by_default_for_a_radiometric_
         return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
 
     assert same(arrays(als), arrays(als, reflectivity="table", transmittance="table"))
-    assert same(arrays(als, transmittance=0.0), arrays(als, reflectivity=None, transmittance=0.0))  # one given: the other none
+    assert same(arrays(als, transmittance=0.0), arrays(als, reflectivity="table", transmittance=0.0))  # one given: the other the table's
+    assert not same(arrays(als, transmittance=0.0), arrays(als, reflectivity=None, transmittance=0.0))
     assert not same(arrays(als), arrays(als, reflectivity=None, transmittance=None))
     plain = als.with_(beam=als.beam.with_(intensity_scale=None))  # no intensity model: no optics by default
     assert same(arrays(plain), arrays(plain, reflectivity=None, transmittance=None))
