@@ -460,3 +460,22 @@ def test_the_footprint_cast_without_a_sensor_is_a_usage_error(tmp_path: Path, ca
     assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), "--sensor-footprint-cast", "exact", "--no-progress"]) == 2
     assert "--sensor-footprint-cast needs --sensor" in capsys.readouterr().err
     assert not (tmp_path / "ds").exists()
+
+
+def test_each_sample_without_returns_is_named(caplog) -> None:
+    """An object beyond the sensor's range has no return: the farm leaves its samples out and names each of them."""
+    import logging
+
+    import trimesh
+
+    from zbuf_occlude.farm.sensor_crops import farm_datasets
+    from zbuf_occlude.sensors.placement import CropDistributions
+    from zbuf_occlude.sensors.request import ScanRequest
+
+    far = CropDistributions(distance_m=(150.0, 150.0), size_m=(1.0, 1.0))  # the VLP-16 reaches 100 m
+    with caplog.at_level(logging.WARNING, logger="zbuf_occlude.farm.sensor_crops"):
+        out = farm_datasets(trimesh.creation.box((1.0, 1.0, 1.0)), ScanRequest("vlp16"), name="chair/train/cube", label=0,
+                            object_index=0, n_samples=3, n_points=16, distributions=far)  # fmt: skip
+    assert len(out["data"]) == 0
+    (message,) = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert message.startswith("chair/train/cube: samples 0, 1, 2 left out")

@@ -6,6 +6,7 @@ the farm owns its shard layout (:mod:`zbuf_occlude.dataset.layout`), so the arra
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -25,6 +26,8 @@ if TYPE_CHECKING:
 
 __all__ = ["farm_datasets"]
 
+log = logging.getLogger(__name__)
+
 
 def farm_datasets(
     mesh: trimesh.Trimesh | str | os.PathLike,
@@ -43,7 +46,7 @@ def farm_datasets(
 
     Each LiDAR sample is its own "pose" (its placement is drawn per sample), so
     ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
-    are left out (their ``n_visible`` would be 0, as for an empty pose).  With
+    are left out (their ``n_visible`` would be 0, as for an empty pose), each named in a warning.  With
     ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
     widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``request``: the farm's
     :class:`~zbuf_occlude.sensors.request.ScanRequest` (its scanner, backend and footprint cast, as
@@ -75,6 +78,10 @@ def farm_datasets(
     clouds = lidar_object_samples(mesh, sensor, name=name, n_samples=n_samples, n_points=n_points, seed=seed,
                                   distributions=distributions, label=label, backend=backend, footprint=footprint)  # fmt: skip
     b = len(clouds)
+    missing = sorted(set(range(n_samples)) - {c.sample_index for c in clouds})
+    if missing:  # each named: the data set holds fewer samples of this object than asked
+        log.warning("%s: sample%s %s left out: no return of the object where it was placed", name, "s" * (len(missing) > 1),
+                    ", ".join(map(str, missing)))  # fmt: skip
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
     optional = {
         key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None
