@@ -126,3 +126,14 @@ def test_an_origin_needs_the_world_frame_and_good_numbers(tmp_path, capsys) -> N
         assert says in capsys.readouterr().err
     assert main(["scan", "box", "--sensor", "riegl-q1560", "--no-progress", "--origin", "1,2", "--out", str(tmp_path / "n")]) == 2
     assert "--origin fills LAS/LAZ files" in capsys.readouterr().err
+
+
+def test_a_block_reaching_beyond_a_trajectorys_bound_scans_without_one() -> None:
+    """200 lines a swath apart reach ±143 km: the scan runs as before, with no trajectory to write."""
+    import zbuf_occlude as zo
+    from zbuf_occlude.sensors import scan_airborne
+
+    wide = BLOCK.with_(n_lines=200, side_overlap=0.0)
+    scene = zo.ScanScene(ground_half_extent_m=20.0).add({"box_m": [2.0, 2.0, 2.0]}, position_m=(0.0, 0.0))
+    s = scan_airborne(scene, wide, (0.0, 0.0), 5.0, seed=0, lateral_shift_m=0.0)
+    assert len(s) > 0 and "trajectory" not in s.meta and "flight" not in s.meta

@@ -18,6 +18,7 @@ from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.beam.adaptive_cast import adaptive_echo_returns, adaptive_footprint
 from zbuf_occlude.sensors.beam.fields import Beam
+from zbuf_occlude.sensors.checks import MAX_COORDINATE_M
 from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
 from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
 from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS, number_returns
@@ -281,7 +282,8 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
         ``scan_angle_deg`` (N,) float64 and ``line_id`` (N,) int32 per return; ``phase_s`` (the
         first line's), ``line_phase_s`` (per line, by id), ``lateral_shift_m`` (per heading),
         ``line_length_m``, ``line_start_s`` (per line, by id), ``trajectory`` (the aircraft's flight,
-        :mod:`~zbuf_occlude.sensors.patterns.flight_times`), ``n_rays``.  The return fields: ``pulse_id`` the
+        :mod:`~zbuf_occlude.sensors.patterns.flight_times`; none for a block whose lines reach beyond
+        :data:`~zbuf_occlude.sensors.checks.MAX_COORDINATE_M`), ``n_rays``.  The return fields: ``pulse_id`` the
         pulse's row among all the plan's pulses, ``gps_time`` its firing time on the plan's clock (the lines
         flown one after another from 0 on), ``scan_angle_deg`` the across-track angle signed as ASPRS LAS 1.4
         defines it (``−meta["scan_angle_deg"]``).  The same seed gives the same bytes.
@@ -305,7 +307,9 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     pulses = scanner.pulses(center_xy, half_size_m, rng, phase_s=phase_s, lateral_shift_m=lateral_shift_m)
     s = fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
                     optics=(reflectivity, transmittance), footprint=footprint)  # fmt: skip
-    s.meta["trajectory"] = Trajectory(*s.meta.pop("flight"), name=scanner.name)
+    time_s, position_m, rotation = s.meta.pop("flight")
+    if np.all(np.abs(position_m) <= MAX_COORDINATE_M):  # a Trajectory's bound; a block reaching farther writes none
+        s.meta["trajectory"] = Trajectory(time_s, position_m, rotation, name=scanner.name)
     return s
 
 
