@@ -159,6 +159,11 @@ class Trajectory:
         rotation, position = _pose_parts(poses, "poses", single=False)
         return cls(time_s, position, rotation, name=name)  # type: ignore[arg-type]
 
+    @staticmethod
+    def holds(position_m: ArrayLike) -> bool:
+        """Whether positions ``(T, 3)`` metres lie within a trajectory's bound, ±:data:`~zbuf_occlude.sensors.checks.MAX_COORDINATE_M`."""
+        return bool(np.all(np.abs(np.asarray(position_m, dtype=np.float64)) <= MAX_COORDINATE_M))
+
     def __len__(self) -> int:
         """T, the samples."""
         return len(self.time_s)

@@ -18,7 +18,6 @@ from zbuf_occlude.geometry.sampling import check_seed
 from zbuf_occlude.resources import check_memory
 from zbuf_occlude.sensors.beam.adaptive_cast import adaptive_echo_returns, adaptive_footprint
 from zbuf_occlude.sensors.beam.fields import Beam
-from zbuf_occlude.sensors.checks import MAX_COORDINATE_M
 from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
 from zbuf_occlude.sensors.beam.echo_energy import Radiometry, Transmission, echo_returns, returns_of_mode, strongest_echo, surface_optics
 from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS, number_returns
@@ -308,7 +307,7 @@ def scan_airborne(scene, scanner, center_xy=(0.0, 0.0), half_size_m: float = 10.
     s = fire_pulses(built, scanner.beam, pulses, rng, sensor_name=scanner.name, sensor_to_world=None, frame="world",
                     optics=(reflectivity, transmittance), footprint=footprint)  # fmt: skip
     time_s, position_m, rotation = s.meta.pop("flight")
-    if np.all(np.abs(position_m) <= MAX_COORDINATE_M):  # a Trajectory's bound; a block reaching farther writes none
+    if Trajectory.holds(position_m):  # a block reaching beyond a trajectory's bound writes none
         s.meta["trajectory"] = Trajectory(time_s, position_m, rotation, name=scanner.name)
     return s
 
