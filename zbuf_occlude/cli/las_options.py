@@ -93,12 +93,11 @@ def check_origin_option(text: str, option: str) -> tuple[float, ...]:
     """
     from zbuf_occlude.sensors.scan_data import las_origin
 
-    parts = text.split(",")
     try:
-        values = [float(p) for p in parts]
+        values = [float(p) for p in text.split(",")]
     except ValueError:
-        raise InvalidInputError(f"{option} must be E,N or E,N,H in metres, got {text!r:.60}") from None
-    return tuple(float(v) for v in las_origin(values, option)[: len(values)])
+        raise InvalidInputError(f"{option} must be E,N or E,N,H in metres, got {shown(text)}") from None
+    return tuple(las_origin(values, option).tolist())
 
 
 def add_las_arguments(parser: argparse.ArgumentParser) -> None:

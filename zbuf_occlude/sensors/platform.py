@@ -162,7 +162,7 @@ class Trajectory:
     @staticmethod
     def holds(position_m: ArrayLike) -> bool:
         """Whether positions ``(T, 3)`` metres lie within a trajectory's bound, ±:data:`~zbuf_occlude.sensors.checks.MAX_COORDINATE_M`."""
-        return bool(np.all(np.abs(np.asarray(position_m, dtype=np.float64)) <= MAX_COORDINATE_M))
+        return not np.any(_beyond_bound(np.asarray(position_m, dtype=np.float64).reshape(-1, 3)))
 
     def __len__(self) -> int:
         """T, the samples."""
@@ -431,9 +431,14 @@ def _sample_checks(time: NDArray[np.float64], position: NDArray[np.float64]) -> 
     """``(field, the rows refused (T,) bool, why)`` of each check of the samples' times and positions."""
     return [
         ("time_s", ~(np.abs(time) <= MAX_TIME_S), f"must be a finite number of seconds within ±{MAX_TIME_S:g}"),
-        ("position_m", ~np.all(np.abs(position) <= MAX_COORDINATE_M, axis=1), f"must be finite, within ±{MAX_COORDINATE_M:g} m"),
+        ("position_m", _beyond_bound(position), f"must be finite, within ±{MAX_COORDINATE_M:g} m"),
         ("time_s", np.concatenate([[False], np.diff(time) <= 0]), "must be later than the time before it (times strictly increase)"),
     ]
+
+
+def _beyond_bound(position: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(T,) bool: the rows of ``position (T, 3)`` not finite within ±:data:`~zbuf_occlude.sensors.checks.MAX_COORDINATE_M`."""
+    return ~np.all(np.abs(position) <= MAX_COORDINATE_M, axis=1)
 
 
 def _first_bad(checks: list) -> tuple[str, int, str] | None:

@@ -374,6 +374,7 @@ class AirborneScanner:
             shifts = scanner._shifts(lateral_shift_m).tolist()
         parts = []
         length = line_length_m(center_xy, half_size_m)
+        starts = line_start_s(np.arange(n_total), length, scanner.speed_mps, scanner.turn_s)
         lines = scanner.flight_lines(shifts)
         for line in lines:
             if line.is_reference:
@@ -384,7 +385,7 @@ class AirborneScanner:
                 along, across = line.axes()
                 o = np.column_stack([o[:, :1] * along + (line.offset_m + o[:, 1:2]) * across, o[:, 2]])
                 d = np.column_stack([d[:, :1] * along + d[:, 1:2] * across, d[:, 2]])
-            flown = line_start_s(line.line_id, length, scanner.speed_mps, scanner.turn_s) + length / (2.0 * scanner.speed_mps)
+            flown = starts[line.line_id] + length / (2.0 * scanner.speed_mps)
             parts.append((o, d, a, np.full(len(a), line.line_id, np.int32), ts + flown))  # on the plan's clock
             n_rays = sum(len(p[2]) for p in parts)
             if n_rays * scanner.beam.footprint_rays > MAX_SENSOR_RAYS:  # every line is bounded on its own; the plan's lines add up
@@ -398,7 +399,7 @@ class AirborneScanner:
         else:
             origins, directions, angle, line_id, fired = (np.concatenate(arrays) for arrays in zip(*parts))
         meta = {"phase_s": phases[0], "line_phase_s": tuple(phases), "lateral_shift_m": tuple(float(v) for v in shifts),
-                "line_length_m": length, "line_start_s": tuple(line_start_s(range(n_total), length, scanner.speed_mps, scanner.turn_s)),
+                "line_length_m": length, "line_start_s": tuple(starts.tolist()),
                 "flight": flown_poses(lines, length, scanner.altitude_m, scanner.speed_mps, scanner.turn_s)}  # fmt: skip
         return Pulses(
             directions, directions, origins, None, pulse_id=np.arange(len(origins), dtype=np.int64), time_s=fired,

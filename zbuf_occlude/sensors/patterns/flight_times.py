@@ -65,19 +65,23 @@ def flown_poses(lines, length_m: float, altitude_m: float, speed_mps: float, tur
         start = float(line_start_s(line.line_id, length_m, speed_mps, turn_s))
         steps = np.unique(np.append(np.arange(0.0, duration, SAMPLE_STEP_S), duration))
         xy = (line.offset_m * across)[None, :] + (speed_mps * steps - length_m / 2.0)[:, None] * along[None, :]
-        rotation = np.column_stack([[*along, 0.0], [*across, 0.0], [0.0, 0.0, 1.0]])
         if previous is not None and abs(_turn_deg(previous[2], line.heading_deg)) >= 90.0:  # a half-way pose: turn the short way
             t0, p0, h0 = previous
-            heading = h0 + _turn_deg(h0, line.heading_deg) / 2.0
-            phi = math.radians(heading)
             times.append([(t0 + start) / 2.0])
             positions.append([[(p0[0] + xy[0, 0]) / 2.0, (p0[1] + xy[0, 1]) / 2.0, altitude_m]])
-            rotations.append([[[math.cos(phi), -math.sin(phi), 0.0], [math.sin(phi), math.cos(phi), 0.0], [0.0, 0.0, 1.0]]])
+            rotations.append(_heading_rotation(h0 + _turn_deg(h0, line.heading_deg) / 2.0)[None])
+        rotation = _heading_rotation(line.heading_deg)
         times.append(start + steps)
         positions.append(np.column_stack([xy, np.full(len(steps), float(altitude_m))]))
         rotations.append(np.repeat(rotation[None], len(steps), axis=0))
         previous = (start + duration, xy[-1], line.heading_deg)
     return np.concatenate(times), np.concatenate(positions), np.concatenate(rotations)
+
+
+def _heading_rotation(heading_deg: float) -> NDArray[np.float64]:
+    """(3, 3) float64: sensor → world for level flight at ``heading_deg`` (x along it, y to its left, z up)."""
+    phi = math.radians(heading_deg)
+    return np.array([[math.cos(phi), -math.sin(phi), 0.0], [math.sin(phi), math.cos(phi), 0.0], [0.0, 0.0, 1.0]])
 
 
 def _turn_deg(from_deg: float, to_deg: float) -> float:
