@@ -21,6 +21,7 @@ SUB = {name: p for a in build_parser()._actions if isinstance(a, argparse._SubPa
 VALUES = {
     "--distance": "6:9", "--height": "1.7", "--size": "2:3", "--reflectivity": "0.2:0.4", "--footprint": None,
     "--ground-margin": "0.3", "--hidden-below": "0.1:0.2", "--across-sight-width": "0.4:0.6", "--divergence": "0.25",
+    "--min-returns": "12",
 }  # fmt: skip
 
 
@@ -50,6 +51,7 @@ def test_both_names_give_the_same_settings(command: str) -> None:
     d = a.distributions
     assert (d.distance_m, d.height_m, d.size_m, d.reflectivity) == ((6.0, 9.0), (1.7, 1.7), (2.0, 3.0), (0.2, 0.4))
     assert (d.ground_margin_m, d.hidden_below_m, a.footprint, a.across_sight_width_m) == (0.3, (0.1, 0.2), True, (0.4, 0.6))
+    assert d.min_returns == 12
 
 
 def test_farm_records_the_same_data_set_under_either_name() -> None:

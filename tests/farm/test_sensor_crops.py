@@ -479,3 +479,33 @@ def test_each_sample_without_returns_is_named(caplog) -> None:
     assert len(out["data"]) == 0
     (message,) = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert message.startswith("chair/train/cube: samples 0, 1, 2 left out")
+
+
+def test_min_returns_is_recorded_and_every_airborne_sample_holds_it(tmp_path):
+    """``--sensor-min-returns``: on the card (left out when not given, so earlier data sets keep their digest), and no
+    airborne sample holds fewer returns of its object; the placement fields are the aircraft's."""
+    out = tmp_path / "air"
+    argv = ["farm", str(SAMPLES), "--out", str(out), "--sensor", "riegl-q1560", "--samples-per-view", "2", "--points", "64",
+            "--per-class", "1", "--splits", "train", "--classes", "chair,stool", "--sensor-size", "4:5",
+            "--sensor-min-returns", "8", "--no-progress"]  # fmt: skip
+    assert cli_main(argv) == 0
+    card = json.loads((out / CARD_FILE).read_text())
+    assert card["params"]["sensor_min_returns"] == 8
+    assert "sensor_min_returns" not in FarmParams(sensor="hdl32e").to_dict()
+    ds = OccludedDataset(out)
+    assert len(ds) > 0
+    for i in range(len(ds)):
+        _, _, meta = ds[i]
+        assert meta["n_visible"] >= 8
+        assert meta["sensor_height_m"] > 500.0  # the aircraft, not a car roof (riegl-q1560 flies at 1,300 m)
+        assert meta["elevation_deg"] > 45.0
+
+
+@pytest.mark.parametrize("bad", [0, -3, 1.5, "8", None])
+def test_a_card_with_a_bad_min_returns_is_refused_naming_the_option(bad):
+    params = {**FarmParams(sensor="hdl32e").to_dict(), "sensor_min_returns": bad}
+    if bad is None:  # left out when None: the same as not given
+        assert FarmParams.from_dict(params).sensor.distributions.min_returns is None
+        return
+    with pytest.raises(InvalidInputError, match="^--sensor-min-returns must be an integer from 1 to"):
+        FarmParams.from_dict(params)

@@ -20,10 +20,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from zbuf_occlude.cli.options import Check, interval, parse_interval, real, shown
+from zbuf_occlude.cli.options import Check, count, interval, parse_interval, real, shown
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS, MAX_DIVERGENCE_DEG
-from zbuf_occlude.sensors.placement import CropDistributions
+from zbuf_occlude.sensors.placement import MAX_REDRAWS, CropDistributions
 
 __all__ = [
     "BEAM_FIELDS", "CropOption", "CropSettings", "CROP_OPTIONS", "FLAGS", "add_crop_arguments", "check_divergence", "crop_settings",
@@ -106,6 +106,12 @@ CROP_OPTIONS = (
         "stretch the object horizontally so that its crops are, at the median, this wide across the line of sight, "
         "metres (posts as thick as real trunks; a spinning LiDAR; fit-sensor fits it per class)", unset="the meshes' proportions",
         in_crop="makes the object's crops as wide as real scans",
+    ),
+    CropOption(
+        "min_returns", "min-returns", "N", count("MAX_POINTS"),
+        f"the fewest returns of the object a scan holds: a placement that gives fewer is drawn again, up to {MAX_REDRAWS} "
+        "times, and a sample still short is left out and named (as experiment sim2real's --min-returns; an airborne "
+        "scanner sees a few points of a thin object)", unset="every placement as drawn",
     ),
 )  # fmt: skip
 

@@ -64,6 +64,7 @@ OPTION_NAMES = {
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "sensor_divergence_deg": "--sensor-divergence",
     "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
     "sensor_across_sight_width_m": "--sensor-across-sight-width", "sensor_adaptive_footprint": "--sensor-footprint-cast", "up": "--up",
+    "sensor_min_returns": "--sensor-min-returns",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -80,12 +81,12 @@ SENSOR_KEYS = {
     "distance_m": "sensor_distance_m", "height_m": "sensor_height_m", "size_m": "sensor_size_m",
     "reflectivity": "sensor_reflectivity", "footprint": "sensor_footprint", "ground_margin_m": "sensor_ground_margin_m",
     "hidden_below_m": "sensor_hidden_below_m", "across_sight_width_m": "sensor_across_sight_width_m",
-    "divergence_deg": "sensor_divergence_deg", "adaptive_footprint": "sensor_adaptive_footprint",
+    "divergence_deg": "sensor_divergence_deg", "adaptive_footprint": "sensor_adaptive_footprint", "min_returns": "sensor_min_returns",
 }  # fmt: skip
 #: The :class:`CropDistributions` fields the farm sets (and records); the others keep their defaults.
-FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m")
+FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m", "min_returns")
 #: Settings left out of the plan when None: the digest of sensor data sets made before they existed.
-_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint")
+_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint", "min_returns")
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm``'s option of each field of its :class:`~zbuf_occlude.sensors.request.ScanRequest`, for the request's messages.
@@ -121,7 +122,8 @@ class SensorCropParams:
         (``size_m``), metres (default :data:`FARM_CROP_DISTRIBUTIONS`); the object's
         direction and heading are uniform over 0–360°.  Return physics: ``reflectivity``
         (the sensor's radiometric threshold applies).  ``ground_margin_m``: keep the ground
-        returns under each object; ``hidden_below_m``: hide each object's bottom.  The farm
+        returns under each object; ``hidden_below_m``: hide each object's bottom; ``min_returns``: the fewest
+        returns of the object a sample holds (a placement giving fewer is drawn again).  The farm
         sets and records these (:data:`FARM_CROP_FIELDS`); the other fields keep their defaults.
     footprint : bool
         Return physics: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` rays per firing in the

@@ -16,7 +16,7 @@ import numpy as np
 from zbuf_occlude.dataset.layout import POINT_COLUMNS
 from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors.crops import kept_return_fields, lidar_object_samples
-from zbuf_occlude.sensors.placement import CropDistributions
+from zbuf_occlude.sensors.placement import MAX_REDRAWS, CropDistributions
 from zbuf_occlude.sensors.fit import fit_object_shape
 
 if TYPE_CHECKING:
@@ -46,7 +46,9 @@ def farm_datasets(
 
     Each LiDAR sample is its own "pose" (its placement is drawn per sample), so
     ``pose_index`` is the sample number and ``sample_index`` is 0; samples without a return
-    are left out (their ``n_visible`` would be 0, as for an empty pose), each named in a warning.  With
+    are left out (their ``n_visible`` would be 0, as for an empty pose), and so are samples with fewer returns of the
+    object than ``distributions.min_returns`` after their redraws (:func:`~zbuf_occlude.sensors.crops.object_crops`),
+    each named in a warning.  With
     ``across_sight_width_m`` (metres, a LiDAR), the object is stretched horizontally to those
     widths (:func:`~zbuf_occlude.sensors.fit.fit_width_scale`, seeded with ``seed``).  ``request``: the farm's
     :class:`~zbuf_occlude.sensors.request.ScanRequest` (its scanner, backend and footprint cast, as
@@ -80,8 +82,13 @@ def farm_datasets(
     b = len(clouds)
     missing = sorted(set(range(n_samples)) - {c.sample_index for c in clouds})
     if missing:  # each named: the data set holds fewer samples of this object than asked
-        log.warning("%s: sample%s %s left out: no return of the object where it was placed", name, "s" * (len(missing) > 1),
-                    ", ".join(map(str, missing)))  # fmt: skip
+        least = distributions.min_returns
+        why = (
+            "no return of the object where it was placed"
+            if least is None
+            else f"fewer than {least} returns of the object in {1 + MAX_REDRAWS} placements"
+        )
+        log.warning("%s: sample%s %s left out: %s", name, "s" * (len(missing) > 1), ", ".join(map(str, missing)), why)  # fmt: skip
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
     optional = {
         key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -25,7 +25,7 @@ from zbuf_occlude.sensors.patterns.airborne import AirborneScanner
 from zbuf_occlude.sensors.patterns.depth_camera import DepthCamera
 from zbuf_occlude.sensors.kinds import kind_of
 from zbuf_occlude.sensors.patterns.spinning import Lidar
-from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, CropDistributions, Placement, draw_placement
+from zbuf_occlude.sensors.placement import DEFAULT_GROUND_REFLECTIVITY, MAX_REDRAWS, CropDistributions, Placement, draw_placement
 from zbuf_occlude.sensors.patterns.ray_table import RayTable
 from zbuf_occlude.sensors.scan import scan, scanned_by
 from zbuf_occlude.sensors.scan_data import Scan
@@ -37,7 +37,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
 __all__ = [
-    "CropSample", "DrawnCrop", "object_crop", "object_crops", "lidar_object_samples", "kept_return_fields", "side_occluders",
+    "CropSample", "DrawnCrop", "object_crop", "object_crops", "object_returns", "lidar_object_samples", "kept_return_fields", "side_occluders",
     "CROP_STREAM", "SIDE_OCCLUDER_RANGE", "RETURN_FIELDS",
 ]  # fmt: skip
 
@@ -182,6 +182,10 @@ def object_crops(
     Crop ``k`` draws its placement (:func:`~zbuf_occlude.sensors.placement.draw_placement`) and then its
     scan's seed from ``derive_rng(seed, object_key(name), CROP_STREAM, k)``, so that one seed, one
     name and one mesh give the same crops through either command, and every crop is reproducible alone.
+    Where ``distributions.min_returns`` is given and the crop holds fewer returns of the object
+    (:func:`object_returns`), crop ``k`` is drawn again from ``derive_rng(..., k, r)``, ``r = 1 ..``
+    :data:`~zbuf_occlude.sensors.placement.MAX_REDRAWS`, until one holds enough; the last draw is
+    yielded when none does (the caller leaves it out).
 
     Parameters
     ----------
@@ -206,12 +210,21 @@ def object_crops(
         follows from it (the farm its subsample of the returns).
     """
     key = object_key(name)
+    least = distributions.min_returns
     for k in range(int(n_samples)):
-        rng = derive_rng(seed, key, CROP_STREAM, k)
-        placement = draw_placement(distributions, rng)
-        crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame,
-                           optics=optics, footprint=footprint)  # fmt: skip
+        for redraw in range(1 + (0 if least is None else MAX_REDRAWS)):
+            rng = derive_rng(seed, key, CROP_STREAM, k, *((redraw,) if redraw else ()))  # the first draw: the stream without the minimum
+            placement = draw_placement(distributions, rng)
+            crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame,
+                               optics=optics, footprint=footprint)  # fmt: skip
+            if least is None or object_returns(crop) >= least:
+                break
         yield DrawnCrop(k, crop, rng)
+
+
+def object_returns(crop: CropSample) -> int:
+    """The returns of the object in ``crop`` (ground returns under it not counted)."""
+    return int(np.count_nonzero(crop.scan.object_id == 1))
 
 
 #: A side occluder stands at this share of the distance to the object's nearest vertex.
@@ -328,7 +341,8 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     """An airborne crop: the object ``offset_m`` across track from the plan centre (``distance_m ·
     sin(azimuth_deg)`` of the placement; ``height_m`` is unused: the scanner flies at its altitude),
     scanned from every line of the flight plan that sees it.  Points and the full scan are in the
-    world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'."""
+    world frame; the crop's ``meta["line_id"]`` and ``meta["scan_angle_deg"]`` are its returns'.  The crop's
+    placement records the object as the aircraft saw it (:func:`_seen_from`)."""
     from zbuf_occlude.sensors.scan import scan_airborne
 
     obj = SceneObject(mesh, class_name, (0.0, offset_m), placement.yaw_deg, size, width_scale=placement.stretch,
@@ -337,7 +351,19 @@ def _airborne_crop(mesh, sensor: AirborneScanner, placement: Placement, *, seed:
     scene = ScanScene(objects=[obj], occluders=list(occluders), ground_half_extent_m=abs(offset_m) + 2.0 * reach)
     full = scan_airborne(scene, sensor, (0.0, offset_m), reach, seed=seed, footprint=footprint,
                          **({} if optics is None else _optics(optics, scene, None)))  # fmt: skip
-    return _crop_object(scene, full, placement, full.sensor_position)
+    return _crop_object(scene, full, replace(placement, **_seen_from(full.sensor_position, scene.ground_z_m, (0.0, offset_m))),
+                        full.sensor_position)  # fmt: skip
+
+
+def _seen_from(sensor_world, ground_z_m: float, centre_xy: tuple[float, float]) -> dict[str, float]:
+    """The placement fields of an airborne crop as its platform saw the object: ``height_m`` the aircraft above the
+    ground, ``distance_m`` the horizontal distance from it to the object's footprint centre ``centre_xy`` (world
+    frame, metres), ``azimuth_deg`` the object's direction from it in [0, 360), degrees; the aircraft at ``sensor_world``,
+    the scan's mean position of its returns.  The ground placement drawn for the crop set only the object's offset
+    across track; a crop's record says where the sensor was."""
+    x, y, z = (float(v) for v in sensor_world)
+    dx, dy = centre_xy[0] - x, centre_xy[1] - y
+    return {"height_m": z - float(ground_z_m), "distance_m": math.hypot(dx, dy), "azimuth_deg": math.degrees(math.atan2(dy, dx)) % 360.0}
 
 
 def _optics(optics: Callable[[ScanScene], dict], scene: ScanScene, rho) -> dict:
@@ -412,7 +438,8 @@ def lidar_object_samples(
         ``ring`` and, for a sensor that records several returns per pulse
         (:func:`kept_return_fields`), the per-point ``returns``: a dict of each return field's
         ``(n_points,)`` values at the sample's points (dtypes as :class:`~zbuf_occlude.sensors.scan_data.Scan`'s).
-        Samples with no return are left out (logged).
+        Samples with no return, or fewer of the object than ``distributions.min_returns`` after its redraws
+        (:func:`object_crops`), are left out (logged).
 
     Raises
     ------
@@ -432,8 +459,8 @@ def lidar_object_samples(
     ):
         placement = crop.placement
         n = len(crop.scan)
-        if n == 0:
-            log.info("%s sample %d: no return at %.1f m", name, k, placement.distance_m)
+        if n == 0 or (distributions.min_returns is not None and object_returns(crop) < distributions.min_returns):
+            log.info("%s sample %d: %d returns of the object at %.1f m", name, k, object_returns(crop), placement.distance_m)
             continue
         chosen, _ = draw_sample(np.arange(n), int(n_points), rng)
         # Sensor seen from the object's bounding-box centre, in the mesh frame.

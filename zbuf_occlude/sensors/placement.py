@@ -14,9 +14,10 @@ from typing import Any
 
 import numpy as np
 
+from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.sizes import DIMENSIONS
-from zbuf_occlude.sensors.checks import namer
+from zbuf_occlude.sensors.checks import count, namer
 from zbuf_occlude.sensors.scene.object_shapes import check_width_profile
 
 __all__ = [
@@ -25,6 +26,7 @@ __all__ = [
     "ObjectPlacement",
     "Placement",
     "DEFAULT_GROUND_REFLECTIVITY",
+    "MAX_REDRAWS",
     "check_across_sight_width",
     "check_ground_margin",
     "draw_placement",
@@ -32,6 +34,9 @@ __all__ = [
 
 #: ρ of the ground plane when a crop models reflectivity: asphalt and concrete in the near infrared, an assumption.
 DEFAULT_GROUND_REFLECTIVITY = 0.15
+#: Placements drawn again, at most, for a crop holding fewer returns than ``CropDistributions.min_returns``: after
+#: them a sample is left out (and named).  A bound on the scans one sample may cost, not a measured figure.
+MAX_REDRAWS = 8
 
 
 def _interval(name: str, value, lowest: float | None = None, *, above: bool = False, unit: str = "") -> tuple[float, float]:
@@ -212,6 +217,12 @@ class CropDistributions:
         rest behind a parked car, a wall or a tree, or cut off by the segmentation: a partial
         view, not a thinner object (compare ``width_scale``).  None (default): nothing hidden.
         :func:`~zbuf_occlude.sensors.fit.fit_visible_across_sight` fits it to the widths of real scans.
+    min_returns : int, optional
+        The fewest returns of the object a crop holds, 1 to :data:`~zbuf_occlude.defaults.MAX_POINTS`: a
+        placement whose crop holds fewer is drawn again, up to :data:`MAX_REDRAWS` times
+        (:func:`~zbuf_occlude.sensors.crops.object_crops`), so the placements are those drawn here given that the
+        sensor sees enough of the object, as a data set of real crops keeps only objects with enough points.
+        None (default): every draw, as it comes.
     option_names : mapping of str to str, optional
         What the messages call each field (the command line passes its flags, e.g.
         ``{"hidden_below_m": "--hidden-below"}``); a field not named is called by its name.  Not stored.
@@ -238,6 +249,7 @@ class CropDistributions:
     width_scale: tuple[float, float] | None = None
     width_profile: tuple[float, ...] | None = None
     visible_across_sight: tuple[float, float] | None = None
+    min_returns: int | None = None
 
     option_names: InitVar[Mapping[str, str] | None] = None
 
@@ -268,6 +280,8 @@ class CropDistributions:
             if visible[1] <= 0:
                 raise InvalidInputError(f"{n('visible_across_sight')} must leave a share > 0 visible, got {self.visible_across_sight!r}")
             object.__setattr__(self, "visible_across_sight", visible)
+        if self.min_returns is not None:
+            object.__setattr__(self, "min_returns", count(self.min_returns, n("min_returns"), low=1, high=MAX_POINTS))
 
 
 def draw_placement(dist: CropDistributions, rng: np.random.Generator) -> Placement:
