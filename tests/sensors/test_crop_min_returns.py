@@ -30,7 +30,9 @@ def vlp16():
 
 
 def _returns(mesh, sensor, dist, n=12, seed=3):
-    return [(k, object_returns(crop), crop.placement) for k, crop, _ in object_crops(mesh, sensor, dist, name="post", n_samples=n, seed=seed)]
+    return [
+        (k, object_returns(crop), crop.placement) for k, crop, _ in object_crops(mesh, sensor, dist, name="post", n_samples=n, seed=seed)
+    ]
 
 
 def test_short_placements_are_drawn_again_and_the_others_kept(post, vlp16) -> None:
