@@ -105,7 +105,7 @@ def test_a_cloud_whose_preparation_would_exhaust_memory_is_refused_first(monkeyp
     """Under the 10-million-point cap, a cloud's splats can still need more memory than there is."""
     monkeypatch.setattr(resources, "available_memory", lambda: (2**16, "test budget"))
     monkeypatch.setattr(resources, "MIN_CHECKED_BYTES", 0)  # a small cloud, a smaller budget
-    with pytest.raises(InsufficientMemoryError, match=r"preparing the splats of 800 points needs about 400 KiB.*or normals") as info:
+    with pytest.raises(InsufficientMemoryError, match=r"preparing the splats of 800 points needs about 825 KiB.*or normals") as info:
         point_surfels(SPHERE)
     assert "\n" not in str(info.value)
     with pytest.raises(InsufficientMemoryError, match=r"800 points needs about 175 KiB"):
@@ -124,7 +124,7 @@ def test_a_disk_that_nearly_reaches_the_camera_plane_covers_the_image() -> None:
 
 
 #: Points of the cloud under the 10-million-point cap of a point-set file whose splats' estimated
-#: normals need an (N, 14) float64 array of 1.04 GiB (and as much again for the indices).
+#: normals need an (N, 48) float64 array of 3.5 GiB (and as much again for the indices).
 _NEAR_CAP_POINTS = 9_900_000
 #: The address space of the child, as a user's ``ulimit -v`` of 3 GB (2 GB for the view).
 _PREPARE_LIMIT, _VIEW_LIMIT = 3 << 30, 2 << 30
@@ -156,7 +156,7 @@ except ZbufOccludeError as exc:
 
 @pytest.mark.parametrize("what", ["prepare", "view"])
 def test_a_cloud_near_the_point_cap_is_refused_before_the_work_under_a_memory_limit(what) -> None:
-    """9.9 million points fit the point-set cap; their preparation (5 GB with normals estimated)
+    """9.9 million points fit the point-set cap; their preparation (10 GB with normals estimated)
     or one view (2 GB) does not fit a 3 GB or 2 GB process: one line, before any of it is
     allocated, never a MemoryError."""
     from memory_limit import run_python_limited

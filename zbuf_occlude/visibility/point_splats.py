@@ -80,11 +80,11 @@ __all__ = [
 #: grid's 40 (which tracemalloc does not see); rounded up.
 BYTES_PER_SURFEL = 224
 #: Bytes per point the normals' estimate adds when none are given
-#: (:func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`): the 14 nearest
-#: neighbours' distances and indices instead of 5 (+144), the plane fits of three sizes (72 +
-#: 24), the chosen normals and the spacing they use (32).  272 B more than with normals,
-#: measured as above (tracemalloc's peak 451 B a point; peak RSS grew 427-430 B); rounded up.
-BYTES_PER_ESTIMATED_NORMAL = 288
+#: (:func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`): the 48 nearest
+#: neighbours' distances and indices instead of 5 (+688), the plane fits of three sizes (72 +
+#: 24), the chosen normals and the spacing they use (32).  816 B more than with normals,
+#: measured as above (tracemalloc's peak 994-996 B a point; peak RSS grew 995 B); rounded up.
+BYTES_PER_ESTIMATED_NORMAL = 832
 #: Address space each thread of the neighbour search maps (from 2 threads, one per core and
 #: :data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points): its stack (8 MiB,
 #: ``ulimit -s``) and the glibc malloc arena its first allocation reserves (64 MiB on 64-bit), which
