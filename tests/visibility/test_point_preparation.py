@@ -131,7 +131,7 @@ def _cloud(kind: str, n: int, seed: int) -> np.ndarray:
 
 
 @settings(max_examples=40, deadline=None)
-@given(kind=clouds, n=st.integers(2, 3_000), k=st.integers(1, 20), seed=st.integers(0, 2**31))
+@given(kind=clouds, n=st.integers(2, 3_000), k=st.integers(1, 64), seed=st.integers(0, 2**31))
 def test_the_grid_finds_the_k_d_tree_s_neighbours(kind, n, k, seed):
     points = _cloud(kind, n, seed)
     k = min(k, n)

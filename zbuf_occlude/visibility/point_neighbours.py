@@ -103,13 +103,23 @@ def grid_neighbours(points, queries, k, lo, h, dims, start, members, distance, i
     into ``distance`` and ``index`` (``(len(queries), k)``): the grid's cells ring by ring around
     the query's, until the k-th distance found is within the searched block (exact: a point
     outside it lies farther than the block's nearest face), skipping a cell once k points nearer
-    than its box are found (15-20 % less CPU at 100,000 points)."""
+    than its box are found (15-20 % less CPU at 100,000 points).  The previous query's k neighbours, k
+    distinct points, bound the k-th distance of the next one (``bound``): a cell or a point farther is
+    skipped from the start, which gives the same neighbours, in the same order, with fewer points
+    tried (queries in Morton order lie close together)."""
     best = np.empty(k)
     at = np.empty(k, np.int64)
     margin = 1e-9 * h  # a point bucketed by rounding just outside its cell
     for row in range(queries.shape[0]):
         i = queries[row]
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        bound = np.inf  # no k-th distance beyond the previous query's k neighbours, seen from here
+        if row > 0:
+            bound = 0.0
+            for m in range(k):
+                j = at[m]
+                dx, dy, dz = points[j, 0] - x, points[j, 1] - y, points[j, 2] - z
+                bound = max(bound, dx * dx + dy * dy + dz * dz)
         cx = min(max(int((x - lo[0]) / h), 0), dims[0] - 1)
         cy = min(max(int((y - lo[1]) / h), 0), dims[1] - 1)
         cz = min(max(int((z - lo[2]) / h), 0), dims[2] - 1)
@@ -123,13 +133,16 @@ def grid_neighbours(points, queries, k, lo, h, dims, start, members, distance, i
                     step = 1 if edge else 2 * r
                     az = cz - r
                     while az <= cz + r:
-                        if 0 <= az < dims[2] and (found < k or _box_gap2(x, y, z, lo, h, ax, ay, az, margin) < best[k - 1]):
+                        if 0 <= az < dims[2] and (
+                            _box_gap2(x, y, z, lo, h, ax, ay, az, margin) <= bound if found < k
+                            else _box_gap2(x, y, z, lo, h, ax, ay, az, margin) < best[k - 1]
+                        ):  # fmt: skip
                             c = (ax * dims[1] + ay) * dims[2] + az
                             for m in range(start[c], start[c + 1]):
                                 j = members[m]
                                 dx, dy, dz = points[j, 0] - x, points[j, 1] - y, points[j, 2] - z
                                 d2 = dx * dx + dy * dy + dz * dz
-                                if found == k and d2 >= best[k - 1]:
+                                if d2 > bound or (found == k and d2 >= best[k - 1]):
                                     continue
                                 slot = found if found < k else k - 1
                                 while slot > 0 and best[slot - 1] > d2:
