@@ -90,3 +90,22 @@ def test_an_airborne_crop_records_where_the_aircraft_was() -> None:
         horizontal = x["height_m"] / np.tan(np.radians(c.elevation_deg))
         assert x["distance_m"] == pytest.approx(horizontal, rel=0.05, abs=1.0)
         assert 0.0 <= x["azimuth_deg"] < 360.0
+
+
+def test_scan_writes_no_sample_short_of_the_minimum_and_names_it(tmp_path, caplog) -> None:
+    """``scan --min-returns``: a sample whose object stays short after its redraws is not written, and is named."""
+    from zbuf_occlude.cli.main import main
+
+    out = tmp_path / "o"
+    argv = ["scan", "box", "--sensor", "vlp16", "--samples", "2", "--distance", "60:80", "--size", "0.3", "--min-returns", "500",
+            "--crop", "--out", str(out), "--no-progress"]  # fmt: skip
+    with caplog.at_level(logging.WARNING, logger="zbuf_occlude.sensors.scan_files"):
+        assert main(argv) == 0
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert said == [f"box: scan {k} left out: fewer than 500 returns of the object in {1 + MAX_REDRAWS} placements" for k in (0, 1)]
+    assert not list(out.glob("*.npz"))
+    near = ["scan", "box", "--sensor", "vlp16", "--samples", "2", "--distance", "5:8", "--size", "1", "--min-returns", "20", "--crop",
+            "--out", str(tmp_path / "p"), "--no-progress"]  # fmt: skip
+    caplog.clear()
+    assert main(near) == 0
+    assert len(list((tmp_path / "p").glob("*.npz"))) == 2 and not [r for r in caplog.records if r.levelno == logging.WARNING]
