@@ -115,3 +115,27 @@ def test_a_refused_trajectory_leaves_a_foreign_file_in_out_alone(tmp_path: Path,
         code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), *extra, "--no-progress", "--out", str(out)], capsys)
         assert code == 2, err
         assert sorted(p.name for p in out.iterdir()) == ["notes.txt"] and (out / "notes.txt").read_text() == "mine"
+
+
+def test_a_moving_scan_written_as_las_writes_its_sweep_s_trajectory_beside_it(tmp_path: Path, capsys) -> None:
+    """As an airborne flight's: ``<stem>_trajectory.csv`` on the LAS clock (``--gps-start`` added), read back by
+    ``load_trajectory``; the sensor of every return's pulse lies on it."""
+    import laspy
+
+    from zbuf_occlude.sensors.platform import load_trajectory
+
+    out = tmp_path / "o"
+    code, err = _run(["scan", SCENE, "--trajectory", str(_trajectory(tmp_path)), "--samples", "2", "--frame", "world",
+                      "--format", "las", "--gps-start", "1000", "--no-progress", "--out", str(out)], capsys)  # fmt: skip
+    assert code == 0, err
+    written = sorted(out.glob("*_trajectory.csv"))
+    assert [p.name.replace("_trajectory.csv", "") for p in written] == [p.stem for p in sorted(out.glob("*.las"))]
+    for k, path in enumerate(written):
+        flown = load_trajectory(path)
+        las = laspy.read(path.with_name(path.name.replace("_trajectory.csv", ".las")))
+        t = np.asarray(las.gps_time)
+        assert flown.start_s <= t.min() + 1e-6 and t.max() <= flown.end_s + 1e-6  # the sweep's own part, on the LAS clock
+        assert 1100.0 + 0.1 * k - 1e-6 <= t.min()
+        x = flown.poses_at(t)[1][:, 0]  # positions; the car drives along +x at 10 m/s from x = -5 at t = 1100
+        np.testing.assert_allclose(x, -5.0 + 10.0 * (t - 1100.0), atol=1e-6)
+    assert not list(tmp_path.glob("*.csv"))[1:]  # nothing written beside the input

@@ -56,8 +56,9 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     """Write ``scan`` as ``<stem>.<format>`` for each of the request's formats through ``folder`` (an
     :class:`~zbuf_occlude.io.owned.OwnedFolder`): a LAS/LAZ file (1.4, point format 6) with the request's ``las``
     keywords, ``ground_z_m`` and ``number`` modulo 65,536 as its point source id where it has no flight lines.
-    A scan whose platform flew a trajectory of its own (``scan.meta["trajectory"]``: an airborne scanner's flight,
-    :mod:`~zbuf_occlude.sensors.patterns.flight_times`) written as LAS or LAZ also writes it, ``<stem>_trajectory.csv``
+    A scan whose platform moved along a trajectory (``scan.meta["trajectory"]``: an airborne scanner's flight,
+    :mod:`~zbuf_occlude.sensors.patterns.flight_times`, or the part of a ``--trajectory`` a ground sensor's sweep
+    drove along) written as LAS or LAZ also writes it, ``<stem>_trajectory.csv``
     (:data:`~zbuf_occlude.sensors.platform.EULER_COLUMNS`, read back by :func:`~zbuf_occlude.sensors.platform.load_trajectory`
     where it lies in the scene's frame, without ``origin_m``),
     its times and positions those of the LAS files: the scan's times plus the request's ``gps_start_s``, its positions
@@ -120,6 +121,8 @@ def scan_scene_file(request: ScanRequest, scene, folder, *, stem: str, seed: int
             start_s = None if trajectory is None else trajectory.start_s + k * sensor.sweep_s  # this sweep's samples only
             platform = pose if trajectory is None else trajectory.since(start_s, until_s=start_s + sensor.sweep_s)
             s = scan(scene, sensor, platform, seed=seed + k, backend=request.backend, frame=request.frame, footprint=request.cast, **optics)
+            if trajectory is not None:  # this sweep's part of the path, written beside a LAS as a flight's is
+                s.meta["trajectory"] = platform
         yield WrittenScan(save_scan(folder, s, f"{stem}_{sensor.name}_s{k:03d}", request, ground_z_m=scene.ground_z_m, number=k))
 
 
