@@ -15,8 +15,8 @@ import numpy as np
 
 from zbuf_occlude.dataset.layout import POINT_COLUMNS
 from zbuf_occlude.mesh.load import load_mesh
-from zbuf_occlude.sensors.crops import kept_return_fields, lidar_object_samples
-from zbuf_occlude.sensors.placement import MAX_REDRAWS, CropDistributions
+from zbuf_occlude.sensors.crops import kept_return_fields, left_out_why, lidar_object_samples
+from zbuf_occlude.sensors.placement import CropDistributions
 from zbuf_occlude.sensors.fit import fit_object_shape
 
 if TYPE_CHECKING:
@@ -82,13 +82,8 @@ def farm_datasets(
     b = len(clouds)
     missing = sorted(set(range(n_samples)) - {c.sample_index for c in clouds})
     if missing:  # each named: the data set holds fewer samples of this object than asked
-        least = distributions.min_returns
-        why = (
-            "no return of the object where it was placed"
-            if least is None
-            else f"fewer than {least} returns of the object in {1 + MAX_REDRAWS} placements"
-        )
-        log.warning("%s: sample%s %s left out: %s", name, "s" * (len(missing) > 1), ", ".join(map(str, missing)), why)  # fmt: skip
+        log.warning("%s: sample%s %s left out: %s", name, "s" * (len(missing) > 1), ", ".join(map(str, missing)),
+                    left_out_why(distributions.min_returns))  # fmt: skip
     f64 = lambda values: np.asarray(values, dtype=np.float64).reshape(b)  # noqa: E731
     optional = {
         key: f64([c.extra[key] for c in clouds]) for key in ("hidden_below_m", "width_scale") if getattr(distributions, key) is not None

@@ -37,7 +37,8 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
 __all__ = [
-    "CropSample", "DrawnCrop", "object_crop", "object_crops", "object_returns", "lidar_object_samples", "kept_return_fields", "side_occluders",
+    "CropSample", "DrawnCrop", "object_crop", "object_crops", "object_returns", "falls_short", "left_out_why",
+    "lidar_object_samples", "kept_return_fields", "side_occluders",
     "CROP_STREAM", "SIDE_OCCLUDER_RANGE", "RETURN_FIELDS",
 ]  # fmt: skip
 
@@ -217,7 +218,7 @@ def object_crops(
             placement = draw_placement(distributions, rng)
             crop = object_crop(mesh, sensor, placement, seed=int(rng.integers(2**63)), class_name=class_name, backend=backend, frame=frame,
                                optics=optics, footprint=footprint)  # fmt: skip
-            if least is None or object_returns(crop) >= least:
+            if not falls_short(crop, least):
                 break
         yield DrawnCrop(k, crop, rng)
 
@@ -225,6 +226,20 @@ def object_crops(
 def object_returns(crop: CropSample) -> int:
     """The returns of the object in ``crop`` (ground returns under it not counted)."""
     return int(np.count_nonzero(crop.scan.object_id == 1))
+
+
+def falls_short(crop: CropSample, min_returns: int | None) -> bool:
+    """Whether ``crop`` holds fewer returns of the object than ``min_returns`` (``CropDistributions.min_returns``;
+    None: no minimum, never short)."""
+    return min_returns is not None and object_returns(crop) < min_returns
+
+
+def left_out_why(min_returns: int | None) -> str:
+    """Why a sample is left out, for the warning that names it: no return of its object, or, with ``min_returns``,
+    fewer than that after its redraws (:func:`object_crops`)."""
+    if min_returns is None:
+        return "no return of the object where it was placed"
+    return f"fewer than {min_returns} returns of the object in {1 + MAX_REDRAWS} placements"
 
 
 #: A side occluder stands at this share of the distance to the object's nearest vertex.
@@ -459,7 +474,7 @@ def lidar_object_samples(
     ):
         placement = crop.placement
         n = len(crop.scan)
-        if n == 0 or (distributions.min_returns is not None and object_returns(crop) < distributions.min_returns):
+        if n == 0 or falls_short(crop, distributions.min_returns):
             log.info("%s sample %d: %d returns of the object at %.1f m", name, k, object_returns(crop), placement.distance_m)
             continue
         chosen, _ = draw_sample(np.arange(n), int(n_points), rng)

@@ -156,17 +156,15 @@ def scan_object(request: ScanRequest, mesh, distributions, folder, *, name: str,
 def _object_scans(request: ScanRequest, mesh, distributions, folder, *, name: str, seed: int, crop: bool, progress: bool):
     """:func:`scan_object`'s samples, once the request is known to place a LiDAR."""
     from zbuf_occlude.io.progress import progress as progress_bar
-    from zbuf_occlude.sensors.crops import object_crops, object_returns
-    from zbuf_occlude.sensors.placement import MAX_REDRAWS
+    from zbuf_occlude.sensors.crops import falls_short, left_out_why, object_crops
     from zbuf_occlude.sensors.scene.objects import GROUND_ID
 
     sensor = request.scanner
     crops = object_crops(mesh, sensor, distributions, name=name, n_samples=request.samples, seed=seed, class_name=name,
                          backend=request.backend, frame=request.frame, optics=request.scene_optics(), footprint=request.cast)  # fmt: skip
-    least = distributions.min_returns
     for k, drawn, _ in progress_bar(crops, total=request.samples, desc="scan", unit="scan", enabled=progress):
-        if least is not None and object_returns(drawn) < least:  # after its redraws: left out, named
-            log.warning("%s: scan %d left out: fewer than %d returns of the object in %d placements", name, k, least, 1 + MAX_REDRAWS)
+        if falls_short(drawn, distributions.min_returns):  # after its redraws: left out, named
+            log.warning("%s: scan %d left out: %s", name, k, left_out_why(distributions.min_returns))
             continue
         s = drawn.scan if crop else drawn.full
         s.meta.update(drawn.placement.to_dict())

@@ -133,10 +133,8 @@ def grid_neighbours(points, queries, k, lo, h, dims, start, members, distance, i
                     step = 1 if edge else 2 * r
                     az = cz - r
                     while az <= cz + r:
-                        if 0 <= az < dims[2] and (
-                            _box_gap2(x, y, z, lo, h, ax, ay, az, margin) <= bound if found < k
-                            else _box_gap2(x, y, z, lo, h, ax, ay, az, margin) < best[k - 1]
-                        ):  # fmt: skip
+                        # a cell no nearer than the bound (the k-th distance once k are found) holds nothing to keep
+                        if 0 <= az < dims[2] and _box_gap2(x, y, z, lo, h, ax, ay, az, margin) <= (bound if found < k else best[k - 1]):
                             c = (ax * dims[1] + ay) * dims[2] + az
                             for m in range(start[c], start[c + 1]):
                                 j = members[m]
