@@ -34,8 +34,8 @@ from zbuf_occlude.mesh.families.parts import assemble
 if TYPE_CHECKING:
     import trimesh  # imported where used: a parser that lists the families loads no trimesh
 
-__all__ = ["CLASS_NAME", "LIMBED_SHARE", "LIMB_START", "NAME", "OPEN_PARTS", "RANGES", "RINGS", "SECTORS", "make", "parts", "unit_parts",
-           "unit_trunk"]
+__all__ = ["CLASS_NAME", "LIMBED_SHARE", "LIMB_START", "NAME", "OPEN_PARTS", "RANGES", "RINGS", "SECTORS", "make", "parts",
+           "unit_parts", "unit_trunk"]  # fmt: skip
 
 NAME = "trunk"
 #: The class folder a trunk is written to: real scans label bare trunks as poles.
@@ -182,7 +182,8 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
     for m in pieces:
         m.apply_scale(height)
     n_stubs = len(unit) - 1
-    return {"stem": pieces[:1], "branch": pieces[1 : 1 + n_stubs], "limb": pieces[1 + n_stubs :]}, {"height_m": height, **params, **limb_params}
+    named = {"stem": pieces[:1], "branch": pieces[1 : 1 + n_stubs], "limb": pieces[1 + n_stubs :]}
+    return named, {"height_m": height, **params, **limb_params}
 
 
 def make(rng: np.random.Generator) -> tuple[trimesh.Trimesh, dict[str, Any]]:
