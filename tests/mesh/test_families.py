@@ -124,46 +124,8 @@ def test_a_trunk_stem_is_as_tall_and_thick_as_drawn(seed: int) -> None:
     stem = used(pieces["stem"][0])
     assert stem[:, 2].max() == pytest.approx(p["height_m"], rel=1e-12)
     assert len(pieces["branch"]) == p["branches"]
-    assert len(pieces["limb"]) == p["limbs"]
     width = stem[stem[:, 2] < 1e-9, :2]  # the ground ring and its centre
     assert np.ptp(width[:, 0]) <= 2 * 1.2 * (1 + p["flare"]) * p["base_radius_ratio"] * p["height_m"]  # noise 4 % (5 sigma)
-
-
-@FEW
-@given(seed=SEEDS)
-def test_a_trunks_limbs_leave_the_stem_together_in_their_range_and_end_at_its_top(seed: int) -> None:
-    from zbuf_occlude.mesh.families.trunk import LIMB_COUNT, LIMB_START, LIMB_TILT_DEG
-
-    _, pieces, p, _ = drawn("trunk", seed)
-    if not p["limbs"]:
-        assert "limb_start" not in p and not pieces["limb"]
-        return
-    assert LIMB_COUNT[0] <= p["limbs"] <= LIMB_COUNT[1]
-    assert LIMB_START[0] <= p["limb_start"] <= LIMB_START[1]
-    height, top = p["height_m"], used(pieces["stem"][0])[:, 2].max()
-    widest = p["base_radius_ratio"] * height  # no limb is as thick as the stem's base without its flare
-    reach = (1 - p["limb_start"]) * height * np.tan(np.radians(LIMB_TILT_DEG[1]))
-    for limb in pieces["limb"]:
-        v = used(limb)
-        assert limb.is_watertight
-        assert v[:, 2].max() <= top + 1e-9  # no limb rises above the stem: the drawn height stays the object's
-        assert v[:, 2].min() >= p["limb_start"] * height - widest
-        assert np.ptp(v[:, 0]) <= reach + 2 * widest and np.ptp(v[:, 1]) <= reach + 2 * widest
-
-
-def test_a_share_of_trunks_have_limbs_drawn_after_the_stem_and_stubs_of_before() -> None:
-    from zbuf_occlude.mesh.families.trunk import LIMBED_SHARE, unit_parts
-
-    family = FAMILIES["trunk"]
-    limbed = []
-    for seed in range(200):
-        pieces, params = family.parts(family_rng("trunk", seed, 0))
-        limbed.append(params["limbs"] > 0)
-        unit, _ = unit_parts(family_rng("trunk", seed, 0))  # the draws before the limbs
-        stem = np.asarray(pieces["stem"][0].vertices)[:-1] / params["height_m"]  # less the ground fan's centre
-        np.testing.assert_allclose(stem, unit[0].vertices, atol=1e-12)
-        assert len(pieces["branch"]) == len(unit) - 1
-    assert abs(np.mean(limbed) - LIMBED_SHARE) < 0.1
 
 
 @FEW
