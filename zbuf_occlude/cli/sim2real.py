@@ -18,7 +18,7 @@ from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
 
-__all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map", "THREADS_HELP"]
+__all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map", "sim2real_config", "THREADS_HELP"]
 
 #: ``--threads``' help, the same for every training command (:mod:`zbuf_occlude.learn.reproducible`).
 THREADS_HELP = (
@@ -71,7 +71,25 @@ def _run(args: argparse.Namespace) -> int:
     pin_cpu_arithmetic()
     # the counts and --out were checked while parsing (cli.options); the device before any rendering
     check_device(args.device)
-    from zbuf_occlude.experiments.sim2real import Sim2RealConfig, run_sim2real
+    from zbuf_occlude.experiments.sim2real import run_sim2real
+
+    config = sim2real_config(args)
+    summary = run_sim2real(
+        config, args.out, device=args.device, threads=training_threads(args.threads), progress=not args.no_progress, say=_say
+    )
+    return print_table(args.out, summary)
+
+
+def sim2real_config(args: argparse.Namespace):
+    """The :class:`~zbuf_occlude.experiments.sim2real.Sim2RealConfig` of parsed ``experiment sim2real`` arguments
+    (checked as the run checks it; its refusals name the options).
+
+    Raises
+    ------
+    InvalidInputError
+        A bad option or combination of options.
+    """
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig
     from zbuf_occlude.experiments.sim2real.config import FAMILY_COUNT
     from zbuf_occlude.mesh.sizes import parse_sizes
 
@@ -84,7 +102,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.sets is not None and not sets:
         raise InvalidInputError(f"--sets must name one or more sets, got {shown(args.sets)}")
     real_options = {"dataset": args.real_format, "up": args.real_up, "units": args.real_units}
-    config = Sim2RealConfig(
+    return Sim2RealConfig(
         args.root, args.real, model=args.model, sensor=args.sensor, scale=args.scale, points=args.points, epochs=args.epochs,
         per_class=args.per_class, seeds=args.seeds, keep_scale=args.keep_scale, label_map=parse_pairs(args.label_map, "--label-map"),
         up=args.up, up_map=up_map, sizes=parse_sizes(args.sizes), real_options=real_options, min_returns=args.min_returns,
@@ -96,10 +114,6 @@ def _run(args: argparse.Namespace) -> int:
         aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
         footprint_cast=args.footprint_cast, sets=sets, **families, option_names=OPTION_NAMES,
     )  # fmt: skip
-    summary = run_sim2real(
-        config, args.out, device=args.device, threads=training_threads(args.threads), progress=not args.no_progress, say=_say
-    )
-    return print_table(args.out, summary)
 
 
 def _say(line: str) -> None:
