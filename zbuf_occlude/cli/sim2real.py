@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval, shown
 from zbuf_occlude.defaults import DEFAULT_METHOD
@@ -17,6 +17,9 @@ from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
+
+if TYPE_CHECKING:
+    from zbuf_occlude.experiments.sim2real import Sim2RealConfig  # torch: imported when the command runs
 
 __all__ = ["add_sim2real_parser", "parse_pairs", "parse_up_map", "sim2real_config", "THREADS_HELP"]
 
@@ -80,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
     return print_table(args.out, summary)
 
 
-def sim2real_config(args: argparse.Namespace):
+def sim2real_config(args: argparse.Namespace) -> Sim2RealConfig:
     """The :class:`~zbuf_occlude.experiments.sim2real.Sim2RealConfig` of parsed ``experiment sim2real`` arguments
     (checked as the run checks it; its refusals name the options).
 
