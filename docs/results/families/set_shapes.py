@@ -6,9 +6,10 @@ usage: python docs/results/families/set_shapes.py SET -- experiment sim2real ARG
 
 Builds seed 0's SET exactly as the run does (its sensor fit, families and placements; nothing is trained) and
 prints, per class, for the fit half's real clouds and for the set's clouds as the classifiers get them (256 points,
-normalised): how many clouds, their height / width (10th / 50th / 90th percentile), the median number of distinct
-points among the 256 (a crop of fewer returns is padded with repeats), and per tenth of the height the mean share of
-points and the median width (the larger horizontal extent) over the height.  The scored half is never read.
+normalised): how many clouds, their height / width as the families fit measures it (10th / 50th / 90th percentile;
+:func:`~zbuf_occlude.experiments.realism_stats.shape_stats`), the median number of distinct points among the 256 (a
+crop of fewer returns is padded with repeats), and the mean share of points per tenth of the height.  The scored
+half is never read.
 """
 
 from __future__ import annotations
@@ -19,17 +20,8 @@ import numpy as np
 
 from zbuf_occlude.cli.main import build_parser
 from zbuf_occlude.cli.sim2real import sim2real_config
+from zbuf_occlude.experiments.realism_stats import shape_stats
 from zbuf_occlude.experiments.sim2real import run as sim2real_run
-
-
-def cloud_stats(points: np.ndarray) -> tuple:
-    z = points[:, 2]
-    height = float(np.ptp(z))
-    tenth = np.minimum(((z - z.min()) / max(height, 1e-9) * 10).astype(int), 9)
-    xy = points[:, :2]
-    widths = [max(np.ptp(xy[tenth == k, 0]), np.ptp(xy[tenth == k, 1])) if (tenth == k).sum() > 1 else 0.0 for k in range(10)]
-    distinct = len(np.unique(points, axis=0))
-    return np.bincount(tenth, minlength=10) / len(points), np.asarray(widths) / height, height / max(np.ptp(xy, axis=0)), distinct
 
 
 def main() -> None:
@@ -41,12 +33,13 @@ def main() -> None:
     fit_half = (sets.real_points[sets.half_a], sets.real_labels[sets.half_a])
     for k, name in enumerate(sets.names):
         for tag, (clouds, labels) in (("real, fit half", fit_half), (kind, (built.points, built.labels))):
-            rows = [cloud_stats(np.asarray(c, np.float64)) for c in clouds[labels == k]]
-            ratio = np.array([r[2] for r in rows])
-            print(f"{name:10s} {tag:15s} {len(rows):3d} clouds; height / width {np.percentile(ratio, 10):.2f} / {np.median(ratio):.2f} / "
-                  f"{np.percentile(ratio, 90):.2f}; distinct points {np.median([r[3] for r in rows]):.0f}\n"
-                  f"  % per tenth {' '.join(f'{v:.0f}' for v in 100 * np.mean([r[0] for r in rows], axis=0))}; "
-                  f"width / height per tenth {' '.join(f'{v:.2f}' for v in np.median([r[1] for r in rows], axis=0))}")  # fmt: skip
+            shapes = [shape_stats(c) for c in clouds[labels == k]]
+            ratio = [s["height_to_width"] for s in shapes]
+            distinct = np.median([len(np.unique(c, axis=0)) for c in clouds[labels == k]])
+            shares = 100 * np.mean([s["height_shares"] for s in shapes], axis=0)
+            print(f"{name:10s} {tag:15s} {len(shapes):3d} clouds; height / width {np.nanpercentile(ratio, 10):.2f} / "
+                  f"{np.nanmedian(ratio):.2f} / {np.nanpercentile(ratio, 90):.2f}; distinct points {distinct:.0f}; "
+                  f"% per tenth {' '.join(f'{v:.0f}' for v in shares)}")  # fmt: skip
 
 
 if __name__ == "__main__":
