@@ -84,7 +84,7 @@ def test_a_moving_platform_needs_rays_cast_from_each_pulse() -> None:
 @given(
     footprint=st.booleans(),
     max_returns=st.sampled_from([None, 1, 2, 4]),
-    return_mode=st.sampled_from([None, "all", "strongest", "last", "dual"]),
+    return_mode=st.sampled_from([None, "all", "first", "strongest", "last", "dual"]),
     range_resolution_m=st.sampled_from([None, 0.5]),
     echo_separation_m=st.sampled_from([None, 0.3]),
     echo_rule=st.sampled_from([None, "chain", "waveform"]),
@@ -101,7 +101,7 @@ def test_a_request_is_refused_in_the_library_words_or_its_beam_is_what_it_asked(
         if asked[field] is not None:
             assert getattr(beam, field) == asked[field], field
     assert beam.footprint_rays == (max(7, base.beam.footprint_rays) if asked["footprint"] else base.beam.footprint_rays)
-    if asked["return_mode"] in ("strongest", "last", "dual") and asked["max_returns"] is None:
+    if asked["return_mode"] in ("first", "strongest", "last", "dual") and asked["max_returns"] is None:
         assert beam.max_returns == {"dual": 2}.get(asked["return_mode"], 1)
 
 

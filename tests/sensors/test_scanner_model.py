@@ -200,9 +200,10 @@ def test_intensity_counts_scale_and_saturate():
         IDEAL_BEAM.intensity_counts([1.0])
 
 
-def test_return_modes_pick_velodyne_returns():
+def test_return_modes_pick_velodyne_and_hesai_returns():
     pulse = np.array([0, 0, 0, 1, 2, 2])
     energy = np.array([1.0, 3.0, 2.0, 5.0, 4.0, 1.0])
+    assert returns_of_mode(pulse, energy, "first").tolist() == [0, 3, 4]
     assert returns_of_mode(pulse, energy, "strongest").tolist() == [1, 3, 4]
     assert returns_of_mode(pulse, energy, "last").tolist() == [2, 3, 5]
     # dual: last and strongest; where the last is the strongest (pulse 1), only it; pulse 2: strongest 4, last 5
@@ -217,11 +218,14 @@ def test_return_modes_keep_one_or_two_returns_per_pulse_in_order(rows):
     rows = sorted(rows, key=lambda r: r[0])
     pulse = np.array([r[0] for r in rows])
     energy = np.array([r[1] for r in rows])
-    for mode, most in (("strongest", 1), ("last", 1), ("dual", 2)):
+    for mode, most in (("first", 1), ("strongest", 1), ("last", 1), ("dual", 2)):
         chosen = returns_of_mode(pulse, energy, mode)
         assert np.all(np.diff(chosen) > 0)
         counts = np.bincount(pulse[chosen], minlength=5)
         assert np.all(counts[np.unique(pulse)] >= 1) and counts.max() <= most
+        if mode in ("first", "last"):  # the pulse's echo nearest the sensor, or farthest (rows are in range order)
+            rows_of = [np.flatnonzero(pulse == p) for p in np.unique(pulse)]
+            assert chosen.tolist() == [r[0] if mode == "first" else r[-1] for r in rows_of]
         if mode == "strongest":
             for p in np.unique(pulse):
                 assert energy[chosen[pulse[chosen] == p]][0] == energy[pulse == p].max()

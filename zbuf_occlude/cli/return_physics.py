@@ -69,8 +69,8 @@ def add_return_physics_arguments(p: argparse.ArgumentParser) -> None:
                         "and refuses it (default: auto)")  # fmt: skip
     r.add_argument(
         "--return-mode", choices=RETURN_MODES, default=None,
-        help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), strongest or last "
-        "(one, as Velodyne's single-return modes), dual (the last and the strongest, Velodyne's dual mode); all but 'all' "
+        help="which echoes of a pulse the receiver records: all (up to --max-returns, in range order), first, strongest or last "
+        "(one: Hesai's single-return modes, Velodyne's strongest and last), dual (the last and the strongest, Velodyne's dual mode); all but 'all' "
         "need --range-resolution (default: the sensor's, 'all' for presets)",
     )  # fmt: skip
     r.add_argument(

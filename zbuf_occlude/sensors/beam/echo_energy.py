@@ -324,8 +324,8 @@ def returns_of_mode(pulse: ArrayLike, energy: ArrayLike, mode: str) -> NDArray[n
         Each echo's pulse, sorted; the echoes of a pulse in range order (:func:`echo_returns`).
     energy : (E,) float
         Each echo's received energy.
-    mode : {"strongest", "last", "dual"}
-        ``"strongest"``: the pulse's strongest echo (the nearest of equals); ``"last"``: its last
+    mode : {"first", "strongest", "last", "dual"}
+        ``"first"``: the pulse's first (nearest) echo; ``"strongest"``: its strongest echo (the nearest of equals); ``"last"``: its last
         echo; ``"dual"``: the last and the strongest, or the last and the second strongest
         where they are one (Velodyne's dual-return mode: VLP-16 user manual 63-9243 Rev. D,
         "Dual Return Mode").
@@ -349,6 +349,8 @@ def returns_of_mode(pulse: ArrayLike, energy: ArrayLike, mode: str) -> NDArray[n
         return np.sort(strongest)
     if mode == "last":
         return last
+    if mode == "first":
+        return start
     if mode != "dual":
         raise InvalidInputError(f"unknown return mode {mode!r}")
     second = np.where(last - start >= 1, order[np.minimum(start + 1, n - 1)], -1)

@@ -52,12 +52,14 @@ __all__ = [
 #:     receiver: RIEGL, Leica, Optech); with ``max_returns`` 1, the pulse's one return (the
 #:     centre ray's first hit, or with a footprint the strongest echo, merged within
 #:     ``echo_separation_m``).
-#: ``"strongest"``, ``"last"``
-#:     the pulse's strongest or last echo only (Velodyne's single-return modes; ``max_returns`` 1).
+#: ``"first"``, ``"strongest"``, ``"last"``
+#:     the pulse's first (nearest), strongest or last echo only (``max_returns`` 1): Velodyne's single-return
+#:     modes are strongest and last (VLP-16 user manual 63-9243 Rev. D, "Return Modes"); Hesai's are first,
+#:     strongest and last (PandarXT-16 user manual, §3.1.2.4, the tail's Return Mode field).
 #: ``"dual"``
 #:     the last and the strongest echo, or the last and the second strongest where they are one
 #:     (Velodyne's dual-return mode; ``max_returns`` 2).
-RETURN_MODES = ("all", "strongest", "last", "dual")
+RETURN_MODES = ("all", "first", "strongest", "last", "dual")
 #: Largest intensity a LAS file stores (unsigned 16 bits).
 MAX_INTENSITY_COUNTS = 65_535
 #: What a device writes as a return's intensity (``Beam.intensity_unit``), in counts of ``intensity_scale``:
@@ -324,7 +326,7 @@ def intensity_counts(energy: ArrayLike, scale: float, top: int = MAX_INTENSITY_C
 #: The :class:`Beam` fields :func:`check_returns` ties together.
 RETURN_FIELDS = ("divergence_deg", "footprint_rays", "max_returns", "return_mode", "range_resolution_m", "echo_rule", "echo_separation_m")
 #: A return mode other than ``"all"`` and the returns per pulse it records.
-MODE_RETURNS = {"strongest": 1, "last": 1, "dual": 2}
+MODE_RETURNS = {"first": 1, "strongest": 1, "last": 1, "dual": 2}
 
 
 def check_returns(values: Mapping[str, object], names: Mapping[str, str | None] | None = None) -> None:
@@ -349,7 +351,7 @@ def check_returns(values: Mapping[str, object], names: Mapping[str, str | None] 
     resolution, separation = values["range_resolution_m"], values["echo_separation_m"]
     resolves = m > 1 or mode != "all"
     what = f"{n('max_returns')} {m}" if mode == "all" else f"{n('return_mode')} {mode}"
-    several = f"{n('max_returns')} above 1 or {n('return_mode')} strongest, last or dual"
+    several = f"{n('max_returns')} above 1 or {n('return_mode')} first, strongest, last or dual"
     if k > 1 and not values["divergence_deg"] > 0:
         raise InvalidInputError(f"{n('footprint_rays')} above 1 needs {n('divergence_deg')} > 0")
     wanted = MODE_RETURNS.get(mode)

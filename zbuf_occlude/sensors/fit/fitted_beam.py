@@ -29,7 +29,7 @@ from typing import Any
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.arguments import described
-from zbuf_occlude.sensors.beam.fields import MAX_INTENSITY_COUNTS
+from zbuf_occlude.sensors.beam.fields import MAX_INTENSITY_COUNTS, MODE_RETURNS
 from zbuf_occlude.sensors.checks import MAX_RANGE_M
 from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
 from zbuf_occlude.sensors.fit.lidar import Estimate
@@ -123,9 +123,9 @@ def _model_changes(beam: Any, returns: int, scaled: bool) -> dict[str, Any]:
     """The beam fields the model's rules change with ``returns`` per pulse: the return mode and the range resolution or
     echo separation a receiver of that many returns cannot have, and a LAS file's 16-bit intensity range."""
     model: dict[str, Any] = {}
-    wanted = {"strongest": 1, "last": 1, "dual": 2}.get(beam.return_mode)
+    wanted = MODE_RETURNS.get(beam.return_mode)
     if wanted is not None and wanted != returns:
-        model["return_mode"] = "all"  # a Velodyne mode records a fixed count: the scans recorded another
+        model["return_mode"] = "all"  # a single- or dual-return mode records a fixed count: the scans recorded another
     mode = model.get("return_mode", beam.return_mode)
     if returns == 1 and mode == "all" and beam.range_resolution_m > 0:
         model["range_resolution_m"] = 0.0  # one return per pulse resolves no echoes
