@@ -419,10 +419,10 @@ def test_scanned_box_outline_is_two_points_per_ring_and_rings_are_the_scanners()
     (more than one point in each), with one return per pulse or with the 7-ray footprint's two;
     the rings from elevations are the scanner's own."""
     from zbuf_occlude.experiments.realism import outline_mask, ring_labels
-    from zbuf_occlude.experiments.sim2real.config import with_returns
+    from zbuf_occlude.sensors.request import kept_returns
 
     scene = S.ScanScene().add({"box_m": [4.5, 1.8, 1.5]}, position_m=(8.0, 0.0))
-    for sensor in (S.Lidar.preset("hdl32e"), with_returns(S.Lidar.preset("hdl32e"), 2)):
+    for sensor in (S.Lidar.preset("hdl32e"), kept_returns(S.Lidar.preset("hdl32e"), 2)):
         crop = S.scan(scene, sensor, seed=0).crop(1)
         p = crop.points.astype(np.float64)
         labels = ring_labels(p)

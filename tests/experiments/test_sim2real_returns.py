@@ -14,7 +14,8 @@ pytest.importorskip("torch")
 
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.sim2real.config import RETURNS_RANGE_RESOLUTION_M, Sim2RealConfig, with_returns
+from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+from zbuf_occlude.sensors.request import RETURNS_RANGE_RESOLUTION_M, kept_returns
 from zbuf_occlude.experiments.sim2real.data import SetRecipe, build_set
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.sensors import lidar_preset
@@ -49,7 +50,7 @@ def _mesh_root(tmp_path: Path) -> Path:
 
 def test_one_return_per_pulse_is_the_sensor_as_given_and_todays_lidar_set(tmp_path: Path) -> None:
     hdl = lidar_preset("hdl32e")
-    assert with_returns(hdl, 1) is hdl and Sim2RealConfig("m", "r", returns=1).sensor == hdl == Sim2RealConfig("m", "r").sensor
+    assert kept_returns(hdl, 1) is hdl and Sim2RealConfig("m", "r", returns=1).sensor == hdl == Sim2RealConfig("m", "r").sensor
     meshes = find_class_meshes(_mesh_root(tmp_path))
     today = build_set("lidar", meshes, ["bush", "pole"], 3, 32, 7, SetRecipe(sensor=hdl))
     one = build_set("lidar", meshes, ["bush", "pole"], 3, 32, 7, SetRecipe(sensor=Sim2RealConfig("m", "r", returns=1).sensor))
@@ -69,9 +70,9 @@ def test_one_return_keeps_a_velodyne_single_return_mode_and_rewrites_a_beam_of_s
     from zbuf_occlude.sensors.kinds import with_beam
 
     velodyne = with_beam(lidar_preset("hdl32e"), footprint_rays=7, return_mode=mode, max_returns=1, range_resolution_m=0.75)
-    assert with_returns(velodyne, 1) is velodyne  # the device's mode, its range resolution and threshold as given
+    assert kept_returns(velodyne, 1) is velodyne  # the device's mode, its range resolution and threshold as given
     q = airborne_preset("riegl-q1560")
-    one = with_returns(q, 1).beam
+    one = kept_returns(q, 1).beam
     assert (one.max_returns, one.return_mode, one.range_resolution_m, one.footprint_rays) == (1, "all", 0.0, q.beam.footprint_rays)
 
 
@@ -79,7 +80,7 @@ def test_several_returns_give_a_bush_points_after_the_first_return() -> None:
     from zbuf_occlude.sensors.crops import object_crop
     from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
 
-    sensor = with_returns(lidar_preset("hdl32e"), 3)
+    sensor = kept_returns(lidar_preset("hdl32e"), 3)
     beam = sensor.beam
     assert (beam.max_returns, beam.footprint_rays, beam.range_resolution_m) == (3, FOOTPRINT_RAYS, RETURNS_RANGE_RESOLUTION_M)
     assert beam.divergence_deg == lidar_preset("hdl32e").beam.divergence_deg == 0.16  # the preset's (HDL-32E data sheet)
@@ -166,7 +167,7 @@ def test_the_lidar_set_casts_the_footprint_the_run_asks_for(tmp_path: Path, monk
     import zbuf_occlude.sensors.crops as crops
 
     meshes = find_class_meshes(_mesh_root(tmp_path))
-    sensor = with_returns(lidar_preset("hdl32e"), 2)
+    sensor = kept_returns(lidar_preset("hdl32e"), 2)
     sets = {footprint: build_set("lidar", meshes, ["bush", "pole"], 3, 64, 0, SetRecipe(sensor=sensor, min_returns=1, footprint=footprint))
             for footprint in ("exact", "adaptive")}  # fmt: skip
     # the adaptive cast changes some crops of these leafy bushes, and is the crops' own adaptive cast

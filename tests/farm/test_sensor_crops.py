@@ -399,20 +399,21 @@ def test_the_adaptive_footprint_needs_a_footprint_whose_echoes_are_resolved(tmp_
         SensorCropParams(str(_echo_sensor(tmp_path)), footprint_cast="adaptive")  # one ray a pulse
     with pytest.raises(InvalidInputError, match=r"--sensor, --sensor-footprint-cast: kinect-v1 is a .*, which has no beam"):
         SensorCropParams("kinect-v1", footprint_cast="adaptive")  # no pulses
-    params = SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast="adaptive")
+    params = SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast="adaptive", returns="all")
     assert params.footprint_mode == "adaptive" and SensorCropParams("hdl32e").footprint_mode == "exact"
     for value in ("yes", 1, None, True):  # one of the three names
         with pytest.raises(InvalidInputError, match="--sensor-footprint-cast must be one of auto, exact, adaptive"):
-            SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast=value)
+            SensorCropParams(str(_echo_sensor(tmp_path)), footprint=True, footprint_cast=value, returns="all")
 
 
 def test_the_default_cast_is_adaptive_where_the_sensor_resolves_a_footprints_echoes(tmp_path: Path):
     sensor = str(_echo_sensor(tmp_path))
-    assert SensorCropParams(sensor, footprint=True).footprint_mode == "adaptive"  # 7 sub-rays, two echoes resolved
-    assert SensorCropParams("riegl-q1560").footprint_mode == "adaptive"  # an airborne preset's 19 sub-rays
-    assert SensorCropParams(sensor).footprint_mode == "exact"  # one ray: nothing to skip
+    assert SensorCropParams(sensor, footprint=True, returns="all").footprint_mode == "adaptive"  # 7 sub-rays, two echoes resolved
+    assert SensorCropParams("riegl-q1560", returns="all").footprint_mode == "adaptive"  # an airborne preset's 19 sub-rays
+    assert SensorCropParams("riegl-q1560").footprint_mode == "exact"  # one return a pulse, the strongest: no echoes resolved
+    assert SensorCropParams(sensor, returns="all").footprint_mode == "exact"  # one ray: nothing to skip
     assert SensorCropParams("hdl32e", footprint=True).footprint_mode == "exact"  # 7 sub-rays, one return: no echoes resolved
-    assert SensorCropParams(sensor, footprint=True, footprint_cast="exact").footprint_mode == "exact"
+    assert SensorCropParams(sensor, footprint=True, footprint_cast="exact", returns="all").footprint_mode == "exact"
 
 
 def test_a_depth_camera_is_no_farm_sensor():
@@ -422,9 +423,9 @@ def test_a_depth_camera_is_no_farm_sensor():
 
 def test_the_card_records_the_adaptive_cast_only_where_it_was_used(tmp_path: Path):
     sensor = str(_echo_sensor(tmp_path))
-    exact = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="exact"))
-    adaptive = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="adaptive"))
-    default = FarmParams(sensor=SensorCropParams(sensor, footprint=True))
+    exact = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="exact", returns="all"))
+    adaptive = FarmParams(sensor=SensorCropParams(sensor, footprint=True, footprint_cast="adaptive", returns="all"))
+    default = FarmParams(sensor=SensorCropParams(sensor, footprint=True, returns="all"))
     assert "sensor_adaptive_footprint" not in exact.to_dict()  # earlier data sets, cast exact, keep their digest
     assert adaptive.to_dict()["sensor_adaptive_footprint"] is True and adaptive.digest() != exact.digest()
     assert default.digest() == adaptive.digest() and default == adaptive  # one cast, one value
@@ -439,7 +440,9 @@ def test_farm_crops_with_the_adaptive_footprint_are_farm_datasets_adaptive_ones(
     import h5py
 
     sensor = str(_echo_sensor(tmp_path))
-    out = _farm(tmp_path / "ds", "--sensor", sensor, "--sensor-footprint", "--classes", "chair")  # cast adaptive by default
+    out = _farm(
+        tmp_path / "ds", "--sensor", sensor, "--sensor-footprint", "--classes", "chair", "--sensor-returns", "all"
+    )  # adaptive by default
     card = json.loads((out / CARD_FILE).read_text())
     assert card["params"]["sensor_adaptive_footprint"] is True
     (shard,) = sorted(out.rglob("*.h5"))

@@ -125,6 +125,7 @@ def _modules_saying(phrase: str) -> list[str]:
         ("needs every hit along each sub-ray", "sensors/beam/echo_energy.py"),
         ("which has no beam to change", "sensors/request.py"),
         ("labels world coordinates", "sensors/scan_data.py"),
+        ("the footprint's strongest surface (``strongest_echo``)", "sensors/request.py"),
         ("lie each in its own pulse's frame", "sensors/scan_data.py"),
     ],
 )

@@ -9,6 +9,7 @@ import sys
 
 from zbuf_occlude.cli.crops import add_crop_arguments, crop_settings, given_crop_options
 from zbuf_occlude.cli.options import Checked, count, given_params, out_folder, poses, real, seed
+from zbuf_occlude.cli.scan_request import returns_per_pulse
 from zbuf_occlude.dataset.layout import STORAGE_MODES
 from zbuf_occlude.defaults import DEFAULT_DENSE_POINTS as GENERATE_DENSE_POINTS
 from zbuf_occlude.defaults import (
@@ -38,6 +39,7 @@ from zbuf_occlude.mesh.inputs.kinds import DEFAULT_POINT_SET_POINTS, POINT_SET_M
 from zbuf_occlude.mesh.scene import UP_CHOICES
 from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
 from zbuf_occlude.sensors.kinds import SENSOR_KINDS
+from zbuf_occlude.sensors.request import TRAINING_RETURNS
 
 log = logging.getLogger(__name__)
 
@@ -119,13 +121,15 @@ def _sensor_params(args: argparse.Namespace) -> dict:
     if args.sensor is None:
         for flag, _ in given_crop_options(args):
             raise InvalidInputError(f"{flag} needs --sensor")
-        if args.sensor_footprint_cast is not None:
-            raise InvalidInputError("--sensor-footprint-cast needs --sensor")
+        for flag, value in (("--sensor-footprint-cast", args.sensor_footprint_cast), ("--sensor-returns", args.sensor_returns)):
+            if value is not None:
+                raise InvalidInputError(f"{flag} needs --sensor")
         return {}
     crops = crop_settings(args, FARM_CROP_DISTRIBUTIONS)
+    returns = TRAINING_RETURNS if args.sensor_returns is None else args.sensor_returns
     return {"sensor": SensorCropParams(args.sensor, crops.distributions, footprint=crops.footprint,
                                        across_sight_width_m=crops.across_sight_width_m, divergence_deg=crops.divergence_deg,
-                                       footprint_cast=args.sensor_footprint_cast or "auto", option_names=crops.names)}  # fmt: skip
+                                       footprint_cast=args.sensor_footprint_cast or "auto", returns=returns, option_names=crops.names)}  # fmt: skip
 
 
 def _merge_command(args: argparse.Namespace) -> int:
@@ -236,6 +240,13 @@ def add_farm_parser(subparsers) -> argparse.ArgumentParser:
         "ray and its neighbours do not show one plane filling it (the same returns but for a surface inside the cone none of them "
         "meets, a fraction of the cost); exact casts every sub-ray; auto is adaptive where the sensor resolves a footprint's "
         "echoes, else exact (default: auto)",
+    )  # fmt: skip
+    s.add_argument(
+        "--sensor-returns", metavar="WHICH", action=Checked, check=returns_per_pulse, default=None,
+        help="what each crop keeps of a pulse's returns, as experiment sim2real's --returns: 1 or strongest (default) one "
+        "return per pulse, the footprint's strongest; first or last: the receiver's first or last echo; all: every return the "
+        "sensor's device records (an airborne preset's several); N above 1: up to N per pulse, the footprint's echoes resolved "
+        "(the card: sensor_returns, where it changes what the sensor records)",
     )  # fmt: skip
     ex = p.add_argument_group("execution")
     ex.add_argument(

@@ -17,7 +17,7 @@ from zbuf_occlude.sensors.request import ScanRequest
 
 __all__ = [
     "BEAM_OPTIONS", "MAX_TRANSMITTANCE_CLASSES", "SCAN_OPTION_FIELDS", "check_max_returns",
-    "check_transmittance", "option_names", "scan_request",
+    "check_transmittance", "option_names", "returns_per_pulse", "scan_request",
 ]  # fmt: skip
 
 #: Each beam option's ``args`` attribute and the request's field it sets
@@ -48,6 +48,22 @@ def check_max_returns(text: str, option: str) -> int:
     if n > MAX_RETURNS:
         raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (a LAS return number's range), got {shown(text)}")
     return n
+
+
+def returns_per_pulse(text: str, option: str) -> int | str:
+    """``--returns WHICH``: a whole number of returns per pulse, or one of
+    :data:`~zbuf_occlude.sensors.request.KEPT_RETURNS` (:func:`~zbuf_occlude.sensors.request.check_kept_returns`)."""
+    from zbuf_occlude.sensors.request import KEPT_RETURNS, check_kept_returns
+
+    word = text.strip().lower()
+    if word in KEPT_RETURNS:
+        return word
+    try:
+        return check_kept_returns(count(None)(text, option), option)
+    except InvalidInputError:
+        raise InvalidInputError(
+            f"{option} must be a whole number of returns per pulse (1 to 15) or one of {', '.join(KEPT_RETURNS)}, got {shown(text)}"
+        ) from None
 
 
 #: Most ``CLASS=VALUE`` pairs ``--transmittance`` takes (a scene file holds at most this many objects' classes).

@@ -11,12 +11,14 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.cli.options import Checked, check_device, count, interval, out_folder, parse_interval, shown
+from zbuf_occlude.cli.scan_request import returns_per_pulse
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.caps import MAX_TABLE_BYTES
 from zbuf_occlude.io.regular_files import read_text_file
 from zbuf_occlude.mesh.formats import EXTENSIONS_TEXT
 from zbuf_occlude.sensors.beam.adaptive_cast import FOOTPRINT_MODES
+from zbuf_occlude.sensors.request import TRAINING_RETURNS
 
 if TYPE_CHECKING:
     from zbuf_occlude.experiments.sim2real import Sim2RealConfig  # torch: imported when the command runs
@@ -122,16 +124,6 @@ def sim2real_config(args: argparse.Namespace) -> Sim2RealConfig:
 def _say(line: str) -> None:
     """A stage of the run, one line on stderr as it starts (reading, the fit: minutes on a large data set)."""
     print(f"sim2real: {line}", file=sys.stderr, flush=True)
-
-
-def returns_per_pulse(text: str, option: str) -> int:
-    """``--returns N``: a whole number from 1 to :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS` (LAS's return numbers)."""
-    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
-
-    n = count(None)(text, option)
-    if n > MAX_RETURNS:
-        raise InvalidInputError(f"{option} must be at most {MAX_RETURNS} (returns per pulse, as LAS 1.4 numbers them), got {shown(text)}")
-    return n
 
 
 def _classes_option(text: str | None) -> str | list[str] | None:
@@ -280,14 +272,14 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--returns",
-        metavar="N",
+        metavar="WHICH",
         action=Checked,
         check=returns_per_pulse,
-        default=1,
-        help="most returns per pulse of the lidar set's scanner: 1 (default) one return per pulse; above 1 each "
-        "pulse's footprint is cast as sub-rays (the sensor's own, or 7, over its beam divergence: 0.16 deg for "
-        "hdl32e) and its echoes resolved by the sensor's range resolution (or 0.75 m) into up to N returns "
-        "(settings.json: lidar_returns; not with --fit-sensor)",
+        default=TRAINING_RETURNS,
+        help="what the lidar set keeps of each pulse's returns, as farm --sensor-returns: 1 or strongest (default) one, the "
+        "footprint's strongest; first or last: the receiver's first or last echo; all: every return the device records; N: "
+        "each pulse's footprint cast as sub-rays (the sensor's own, or 7, over its divergence) and its echoes resolved by its "
+        "range resolution (or 0.75 m) into up to N (settings.json: lidar_returns; --fit-sensor: only what leaves it as it is)",
     )
     p.add_argument(
         "--footprint-cast", choices=FOOTPRINT_MODES, default="auto",

@@ -36,6 +36,7 @@ from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
 from zbuf_occlude.sensors.beam.footprint import MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
+from zbuf_occlude.sensors.request import TRAINING_RETURNS, check_kept_returns, kept_returns
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from zbuf_occlude.mesh.inputs.plan import FarmObject
@@ -64,7 +65,7 @@ OPTION_NAMES = {
     "sensor_reflectivity": "--sensor-reflectivity", "sensor_footprint": "--sensor-footprint", "sensor_divergence_deg": "--sensor-divergence",
     "sensor_ground_margin_m": "--sensor-ground-margin", "sensor_hidden_below_m": "--sensor-hidden-below",
     "sensor_across_sight_width_m": "--sensor-across-sight-width", "sensor_adaptive_footprint": "--sensor-footprint-cast", "up": "--up",
-    "sensor_min_returns": "--sensor-min-returns",
+    "sensor_min_returns": "--sensor-min-returns", "sensor_returns": "--sensor-returns",
 }  # fmt: skip
 
 #: ``farm --sensor``: per-scan placement drawn uniformly from these intervals (metres).
@@ -82,17 +83,25 @@ SENSOR_KEYS = {
     "reflectivity": "sensor_reflectivity", "footprint": "sensor_footprint", "ground_margin_m": "sensor_ground_margin_m",
     "hidden_below_m": "sensor_hidden_below_m", "across_sight_width_m": "sensor_across_sight_width_m",
     "divergence_deg": "sensor_divergence_deg", "adaptive_footprint": "sensor_adaptive_footprint", "min_returns": "sensor_min_returns",
+    "returns": "sensor_returns",
 }  # fmt: skip
 #: The :class:`CropDistributions` fields the farm sets (and records); the others keep their defaults.
 FARM_CROP_FIELDS = ("distance_m", "height_m", "size_m", "reflectivity", "ground_margin_m", "hidden_below_m", "min_returns")
 #: Settings left out of the plan when None: the digest of sensor data sets made before they existed.
-_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint", "min_returns")
+_LEFT_OUT_WHEN_NONE = ("ground_margin_m", "hidden_below_m", "across_sight_width_m", "divergence_deg", "adaptive_footprint", "min_returns",
+                       "returns")  # fmt: skip
 #: The ``farm`` flag of each :class:`CropDistributions` field it sets, for the messages of its checks.
 CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_CROP_FIELDS}
 #: ``farm``'s option of each field of its :class:`~zbuf_occlude.sensors.request.ScanRequest`, for the request's messages.
 FARM_REQUEST_NAMES = {"footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint": OPTION_NAMES["sensor_footprint"],
                       "footprint_rays": OPTION_NAMES["sensor_footprint"], "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
                       "max_returns": "a sensor file's max_returns"}  # fmt: skip
+#: How :func:`~zbuf_occlude.sensors.request.kept_returns` names ``farm``'s returns option and the footprint it casts.
+_RETURNS_NAMES = {
+    "max_returns": OPTION_NAMES["sensor_returns"],
+    "footprint": "a footprint",
+    "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
+}
 #: ``farm --sensor``'s placement when no option changes it.
 FARM_CROP_DISTRIBUTIONS = CropDistributions(
     distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
@@ -147,6 +156,13 @@ class SensorCropParams:
         digest of data sets made before it is kept; a card without it reads as "exact".  Held as the
         cast it resolves to ("exact" or "adaptive"), so that settings read back from a card compare
         equal and the sensor is not read again to know it.
+    returns : int, str or None
+        What each crop keeps of a pulse's returns (:func:`~zbuf_occlude.sensors.request.kept_returns`, the rule
+        ``experiment sim2real`` follows too): 1 (default, :data:`~zbuf_occlude.sensors.request.TRAINING_RETURNS`) or
+        ``"strongest"`` one return per pulse, ``"first"``, ``"last"``, N above 1, or ``"all"`` / None: what the
+        sensor's device records.  Held as None where it leaves the sensor as it is (a spinning preset's one return),
+        and the card records ``sensor_returns`` only where it changes it (an airborne preset's several returns), so
+        the digest of data sets made before it is kept; a card without it reads as None, as they were made.
     option_names : mapping of str to str, optional
         Messages name ``across_sight_width_m`` so (the option as typed; default :data:`OPTION_NAMES`). Not stored.
 
@@ -164,6 +180,7 @@ class SensorCropParams:
     across_sight_width_m: tuple[float, float] | None = None
     divergence_deg: float | None = None
     footprint_cast: str = "auto"
+    returns: int | str | None = TRAINING_RETURNS
     option_names: InitVar[Mapping[str, str] | None] = None
 
     def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
@@ -187,6 +204,13 @@ class SensorCropParams:
         if self.across_sight_width_m is not None:
             option = (option_names or {}).get("across_sight_width_m") or OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
+        if self.returns is not None:  # None where it changes nothing: the card records it only where it does
+            from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
+
+            base = sensor_from_name(self.name)
+            returns = check_kept_returns(self.returns, OPTION_NAMES["sensor_returns"])
+            changes = kind_of(base).pulsed and kept_returns(base, returns, names=_RETURNS_NAMES) is not base
+            object.__setattr__(self, "returns", returns if changes else None)
         sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not (a depth camera)
         object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, sensor.beam))  # one value for one cast
 
@@ -227,6 +251,8 @@ class SensorCropParams:
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
         from zbuf_occlude.sensors.request import ScanRequest
 
+        if self.returns is not None:
+            sensor = kept_returns(sensor, self.returns, names=_RETURNS_NAMES)
         beam = {"footprint": self.footprint, "divergence_deg": self.divergence_deg}
         return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast, names={**FARM_REQUEST_NAMES, "sensor": self.name})
 
@@ -240,7 +266,7 @@ class SensorCropParams:
         """``{"sensor": name, "sensor_distance_m": [lo, hi], ...}``: the flat keys of :data:`SENSOR_KEYS`."""
         values = {**{f: getattr(self.distributions, f) for f in FARM_CROP_FIELDS}, "footprint": self.footprint,
                   "across_sight_width_m": self.across_sight_width_m, "divergence_deg": self.divergence_deg,
-                  "adaptive_footprint": True if self.footprint_mode == "adaptive" else None}  # fmt: skip
+                  "adaptive_footprint": True if self.footprint_mode == "adaptive" else None, "returns": self.returns}  # fmt: skip
         d: dict[str, Any] = {"sensor": self.name}
         for field, key in SENSOR_KEYS.items():
             if values[field] is not None or field not in _LEFT_OUT_WHEN_NONE:
@@ -263,6 +289,7 @@ class SensorCropParams:
             raise InvalidInputError(f"{SENSOR_KEYS['adaptive_footprint']} ({OPTION_NAMES['sensor_adaptive_footprint']}) must be true "
                                     f"or false, got {type(adaptive).__name__} {adaptive!r:.40}")  # fmt: skip
         distributions = dataclasses.replace(FARM_CROP_DISTRIBUTIONS, **crops, option_names=CROP_OPTION_NAMES)
+        values.setdefault("returns", None)  # absent: the returns as the sensor records them, as the data set was made
         return cls(d["sensor"], distributions, footprint_cast="adaptive" if adaptive else "exact", **values)
 
 

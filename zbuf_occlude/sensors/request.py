@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.io.file_errors import value_kind
 from zbuf_occlude.sensors.checks import count, namer
 from zbuf_occlude.sensors.raycast.embree import BACKENDS
 from zbuf_occlude.sensors.beam.fields import MODE_RETURNS, RETURN_FIELDS, check_returns, footprint_changes
@@ -27,7 +28,8 @@ from zbuf_occlude.sensors.beam.echo_energy import check_transmittance_cast
 from zbuf_occlude.sensors.kinds import SensorKind, capabilities, sensor_from_name, with_beam
 from zbuf_occlude.sensors.scan_data import FRAMES, check_las_frame, las_origin
 
-__all__ = ["BEAM_REQUEST_FIELDS", "LAS_FORMATS", "SCAN_FORMATS", "ScanRequest", "beam_changes"]
+__all__ = ["BEAM_REQUEST_FIELDS", "KEPT_RETURNS", "LAS_FORMATS", "RETURNS_RANGE_RESOLUTION_M", "SCAN_FORMATS", "TRAINING_RETURNS",
+           "ScanRequest", "beam_changes", "check_kept_returns", "kept_returns"]  # fmt: skip
 
 #: The beam changes a request may ask for: :class:`~zbuf_occlude.sensors.beam.fields.Beam` fields, and
 #: ``footprint`` (a switch: :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` sub-rays in the beam's cone).
@@ -82,6 +84,98 @@ def beam_changes(beam, given: Mapping[str, object], *, sensor: str, names: Mappi
         changes["range_resolution_m"] = values["range_resolution_m"] = 0.0  # one return per pulse: nothing to resolve
     check_returns(values, {**(names or {}), "footprint_rays": n("footprint")})
     return changes
+
+
+#: What a training cloud keeps of each pulse's returns, besides a count (:func:`kept_returns`): ``"strongest"`` (one return,
+#: the count 1), ``"first"`` or ``"last"`` (one, the receiver's first or last echo), ``"all"`` (what the device records).
+KEPT_RETURNS = ("strongest", "first", "last", "all")
+#: What ``farm --sensor`` and ``experiment sim2real`` keep unless asked otherwise: one return per pulse, the strongest.  Measured
+#: on the real scans the project has (LiDARNet's HDL-32E crops, whose device records one return, the strongest): no training set
+#: of several returns per pulse scored better on them, and two models leaned worse (the results page "sim2real", "With several
+#: returns per pulse").  ``scan`` writes what the device records.
+TRAINING_RETURNS = 1
+#: Least range between two returns of one pulse, metres, where returns are resolved for a sensor whose beam gives none: half the
+#: pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E data sheet 97-0038 and manual 63-9113 give no
+#: pulse length; the value of the sensors guide).
+RETURNS_RANGE_RESOLUTION_M = 0.75
+
+
+def check_kept_returns(value: object, name: str = "returns") -> int | str:
+    """``value`` as :func:`kept_returns` takes it: a whole number 1..15 (LAS's return numbers) or one of :data:`KEPT_RETURNS`,
+    ``"strongest"`` as 1 (one value for one rule: settings read back compare equal).
+
+    Raises
+    ------
+    InvalidInputError
+        Anything else, naming ``name`` and the value (a caller's option, never a user's file).
+    """
+    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
+
+    if isinstance(value, str) and value in KEPT_RETURNS:
+        return 1 if value == "strongest" else value
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_RETURNS:  # its kind, not its value: a card's
+        raise InvalidInputError(f"{name} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse) or one of "
+                                f"{', '.join(KEPT_RETURNS)}, got {value_kind(value)}")  # fmt: skip
+    return value
+
+
+def kept_returns(sensor, returns: int | str = TRAINING_RETURNS, *, names: Mapping[str, str | None] | None = None):
+    """``sensor`` whose beam records what a training cloud keeps of each pulse: the one rule of ``farm --sensor`` and ``experiment sim2real``.
+
+    ``returns``:
+
+    ``1`` or ``"strongest"``
+        One return per pulse: ``sensor`` itself where its beam records one (a single-return mode included), else its beam
+        with ``max_returns`` 1, the footprint's strongest surface (``strongest_echo``).
+    ``"first"``, ``"last"``
+        One return per pulse, the receiver's first (nearest) or last echo: ``sensor`` itself where its beam fires one ray
+        and records one return (its one return is both), else its beam with that ``return_mode`` and its range resolution
+        (or :data:`RETURNS_RANGE_RESOLUTION_M`).
+    ``"all"``
+        ``sensor`` itself: every return its device records.
+    N above 1
+        The multi-return model: up to N returns per pulse in range order, each pulse's footprint cast as the beam's own
+        sub-rays (or :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS` over its divergence), its echoes resolved
+        by its range resolution (or :data:`RETURNS_RANGE_RESOLUTION_M`).
+
+    Every change is made by :func:`beam_changes`, the rule of ``scan``'s beam options, naming the fields as ``names`` maps
+    them (``max_returns`` is the caller's option for ``returns``).
+
+    Raises
+    ------
+    InvalidInputError
+        ``returns`` not one of those (:func:`check_kept_returns`); N above 1 for a beam without a divergence (no footprint
+        to sample); a sensor without a beam (a depth camera).
+    """
+    names = {
+        "footprint": "a footprint",
+        "footprint_rays": "a footprint",
+        "divergence_deg": "a sensor file's divergence_deg",
+        **(names or {}),
+    }
+    n = namer(names)
+    returns = check_kept_returns(returns, n("max_returns"))
+    beam = sensor.beam
+    if returns == "all":
+        return sensor
+    if returns == 1:
+        given = {"max_returns": 1, "return_mode": "all"} if beam.max_returns > 1 else {}
+    elif returns in ("first", "last"):
+        if beam.footprint_rays == 1 and not beam.resolves_echoes:
+            return sensor
+        resolution = beam.range_resolution_m if beam.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
+        given = {"return_mode": returns, "range_resolution_m": resolution, "max_returns": 1}
+    else:
+        resolution = beam.range_resolution_m if beam.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
+        given = {"max_returns": returns, "return_mode": "all", "range_resolution_m": resolution, "footprint": beam.footprint_rays == 1,
+                 "echo_separation_m": 0.0}  # fmt: skip
+    if not given:
+        return sensor
+    try:
+        changes = beam_changes(beam, given, sensor=str(getattr(sensor, "name", "the sensor")), names=names)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{n('max_returns')} {returns}: {exc}") from None
+    return with_beam(sensor, **changes) if changes else sensor
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, per_crop, sim_crops  # noqa: E402
 
-from zbuf_occlude.experiments.sim2real.config import with_returns  # noqa: E402
+from zbuf_occlude.sensors.request import kept_returns  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_csv, write_text  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
@@ -45,7 +45,7 @@ log = logging.getLogger("adaptive_bias")
 HERE = Path(__file__).resolve().parent
 #: The sensors compared: a name and a function of nothing (each is made once).
 SENSORS = (
-    ("--returns 2", lambda: with_returns(Lidar.preset("hdl32e"), 2)),
+    ("--returns 2", lambda: kept_returns(Lidar.preset("hdl32e"), 2)),
     ("hdl32e_footprint.json", lambda: sensor_from_name(str(HERE / "fit" / "hdl32e_footprint.json"))),
 )
 

@@ -45,7 +45,7 @@ from numpy.typing import NDArray  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import fit_half_scans, sim_crops  # noqa: E402
 
-from zbuf_occlude.experiments.sim2real.config import with_returns  # noqa: E402
+from zbuf_occlude.sensors.request import kept_returns  # noqa: E402
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_bytes, write_text  # noqa: E402
 from zbuf_occlude.io.encodings import png_bytes  # noqa: E402
@@ -65,7 +65,7 @@ ON_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fit", "hdl
 RAY_DROP_SENSOR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "ray_drop", "hdl32e_ray_drop.json")
 #: The simulated columns: a title and a function of the HDL-32E preset.
 VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
-    ("simulated, --returns 2", lambda s: with_returns(s, 2)),
+    ("simulated, --returns 2", lambda s: kept_returns(s, 2)),
     ("simulated, the on runs' sensor file:\n7 rays, strongest echo, fitted threshold",
      lambda _: sensor_from_name(ON_SENSOR)),
     ("simulated, the same with the fitted\nray drop on crowns (0.073)", lambda _: sensor_from_name(RAY_DROP_SENSOR)),
@@ -252,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         "HDL-32E scan (every point is return 1: the set records one return per pulse; of the fit half's "
         f"{n_real:,} points, {n_pairs} pairs lie within {SAME_DIRECTION_DEG:g}° of one direction, {n_apart} of them more than "
         f"{SECOND_RETURN_APART_M:g} m apart in range as a pulse's two returns would be); "
-        'the HDL-32E preset with `--returns 2` (`with_returns(hdl32e, 2)`); the sensor file of `experiment sim2real`\'s "on" runs '
+        'the HDL-32E preset with `--returns 2` (`kept_returns(hdl32e, 2)`); the sensor file of `experiment sim2real`\'s "on" runs '
         "(`fit/hdl32e_footprint.json`: the preset with a 7-ray footprint, the strongest echo and the min_echo_reflectance "
         f"fitted on the fit half, {sensor_from_name(ON_SENSOR).beam.min_echo_reflectance:g}; the runs trained with its strongest "
         "surface instead, which gives the same point counts on these crops). The simulated crops are the `lidar` set's of "

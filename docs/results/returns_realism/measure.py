@@ -45,7 +45,7 @@ import numpy as np
 from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, mesh_crops
 from zbuf_occlude.experiments.partial_echo_fit import partial_echo_sensor
 from zbuf_occlude.experiments.realism import RANGE_BINS_M, ObjectCloud, class_summary, outline_mask, range_bin_medians, scan_line_runs
-from zbuf_occlude.experiments.sim2real.config import with_returns
+from zbuf_occlude.sensors.request import kept_returns
 from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
 from zbuf_occlude.experiments.sim2real.placement import CropPlacement
 from zbuf_occlude.io.atomic import write_csv, write_text
@@ -70,7 +70,7 @@ def _strongest_of_7(sensor: Lidar) -> Lidar:
 #: The scanner variants, each a name and a function of the HDL-32E preset; add rows to measure more.
 VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
     ("a: preset, one ray", lambda s: s),
-    ("b: --returns 2", lambda s: with_returns(s, 2)),
+    ("b: --returns 2", lambda s: kept_returns(s, 2)),
     ("c: 7 rays, strongest", _strongest_of_7),
     # not a return model: the preset missing pulses at random (real scan lines break at 3-9 % of their gaps)
     ("a, dropout 0.05", lambda s: with_beam(s, dropout=0.05)),
@@ -80,7 +80,7 @@ VARIANTS: list[tuple[str, Callable[[Lidar], Lidar]]] = [
 MIN_ECHO_REFLECTANCES = (0.1, 0.2, 0.3, 0.5)
 if "min_echo_reflectance" in {f.name for f in fields(Beam)}:
     for _rho in MIN_ECHO_REFLECTANCES:
-        VARIANTS.append((f"b, echo ρ ≥ {_rho:g}", lambda s, r=_rho: with_beam(with_returns(s, 2), min_echo_reflectance=r)))
+        VARIANTS.append((f"b, echo ρ ≥ {_rho:g}", lambda s, r=_rho: with_beam(kept_returns(s, 2), min_echo_reflectance=r)))
         VARIANTS.append((f"c, echo ρ ≥ {_rho:g}", lambda s, r=_rho: with_beam(_strongest_of_7(s), min_echo_reflectance=r)))
 
 log = logging.getLogger("returns_realism")

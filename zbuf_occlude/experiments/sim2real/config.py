@@ -27,12 +27,13 @@ from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam.adaptive_cast import footprint_mode
+from zbuf_occlude.sensors.request import TRAINING_RETURNS, check_kept_returns, kept_returns
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
 
 __all__ = ["Sim2RealScale", "SIM2REAL_SCALES", "SIM2REAL_RECIPE", "VALIDATION_CHOICES", "FITTED_SHAPES", "WIDTH_SHAPES",
-           "RETURNS_RANGE_RESOLUTION_M", "FAMILY_COUNT", "FAMILIES_SEED", "Sim2RealConfig", "with_returns"]  # fmt: skip
+           "FAMILY_COUNT", "FAMILIES_SEED", "Sim2RealConfig"]  # fmt: skip
 
 #: The training recipe of every run (:data:`zbuf_occlude.learn.training.RECIPES`; :mod:`~zbuf_occlude.experiments.sim2real`).
 SIM2REAL_RECIPE = "stable"
@@ -46,10 +47,6 @@ FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
 #: (:data:`~zbuf_occlude.experiments.sim2real.placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
-#: Least range between two returns of one pulse, metres, with ``returns`` above 1, where the sensor
-#: gives none: half the pulse length ``c·τ/2`` of a 5 ns pulse (an ASSUMPTION: the Velodyne HDL-32E
-#: data sheet 97-0038 and manual 63-9113 give no pulse length; the value of the sensors guide).
-RETURNS_RANGE_RESOLUTION_M = 0.75
 #: Family objects added per class with ``fit_families`` when ``family_count`` is not given.
 FAMILY_COUNT = 8
 #: The seed of the families' objects and of their fit's crops (:func:`~zbuf_occlude.experiments.sim2real.families.fit_families`): the same every run.
@@ -158,13 +155,15 @@ class Sim2RealConfig:
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
         (:func:`~zbuf_occlude.experiments.sim2real.placement.fit_mesh_shapes`).
-    returns : int
-        Most returns per pulse of the ``lidar`` set's scanner (:func:`with_returns`), 1 to
-        :data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`.  1 (default): one return per pulse (a
-        spinning preset as given; a beam that resolves echoes, an airborne preset's, records its
-        footprint's strongest echo).  Above 1: the
-        multi-return model (each pulse's footprint cast as sub-rays, its hits resolved into up to
-        ``returns`` echoes; ``settings.json``: ``lidar_returns``).  Not with ``fit_sensor``.
+    returns : int or str
+        What the ``lidar`` set's scanner keeps of each pulse's returns
+        (:func:`~zbuf_occlude.sensors.request.kept_returns`, the rule ``farm --sensor`` follows too):
+        1 (default, :data:`~zbuf_occlude.sensors.request.TRAINING_RETURNS`) or ``"strongest"``: one return per
+        pulse (a spinning preset as given; a beam that resolves echoes, an airborne preset's, records its
+        footprint's strongest echo); ``"first"`` or ``"last"``: the receiver's first or last echo; ``"all"``:
+        what the device records; N above 1: the multi-return model (each pulse's footprint cast as
+        sub-rays, its hits resolved into up to N echoes).  ``settings.json``: ``lidar_returns`` where it
+        is not 1.  Only 1 with ``fit_sensor`` where it changes the sensor.
     footprint_cast : {"auto", "exact", "adaptive"}
         How the ``lidar`` set's crops cast a footprint whose echoes are resolved
         (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint``): "adaptive" casts a
@@ -251,7 +250,7 @@ class Sim2RealConfig:
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
     occluded_points: bool = False
-    returns: int = 1
+    returns: int | str = TRAINING_RETURNS
     footprint_cast: str = "auto"
     fit_families: bool = False
     family_count: int = FAMILY_COUNT
@@ -367,8 +366,10 @@ class Sim2RealConfig:
             # refused here, before any scan or mesh is read: the fit (sensors.fit.fit_lidar) fits a spinning LiDAR only
             raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
                                     f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
-        object.__setattr__(self, "sensor", with_returns(sensor, self.returns, n("returns")))
-        if self.returns > 1 and self.fit_sensor:
+        object.__setattr__(self, "returns", check_kept_returns(self.returns, n("returns")))
+        kept = kept_returns(sensor, self.returns, names={"max_returns": n("returns")})
+        object.__setattr__(self, "sensor", kept)
+        if kept is not sensor and self.returns != 1 and self.fit_sensor:
             # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
             raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
                                     f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
@@ -432,7 +433,7 @@ class Sim2RealConfig:
             "lidar_placement": placement, "lidar_min_returns": int(self.min_returns), "keep_scale_unit_m": KEEP_SCALE_UNIT_M,
             "method": self.method, "train_config": self.train_config(0).identity(("seed", "device", "threads")),
             **({"validate_on": self.validate_on} if self.validates_on_fit_half else {}),
-            **({"lidar_returns": _returns_spec(self.sensor)} if self.returns > 1 else {}),
+            **({"lidar_returns": _returns_spec(self.sensor, self.returns)} if self.returns != 1 else {}),
             **({"lidar_footprint": "adaptive"} if self.footprint_mode == "adaptive" else {}),
             **({"occluded_points": {"set": OCCLUDED_POINTS, "method": POINT_VISIBILITY, "normals": "estimated", "topped_up": False}}
                if self.occluded_points else {}),
@@ -443,48 +444,13 @@ class Sim2RealConfig:
         }  # fmt: skip
 
 
-def with_returns(sensor, returns: int, option: str = "returns"):
-    """``sensor`` (a spinning LiDAR or an airborne scanner) with a beam recording up to ``returns`` returns per pulse.
-
-    ``returns`` 1: one return per pulse: ``sensor`` itself where its beam records one (a Velodyne
-    single-return mode included: ``return_mode`` "strongest" or "last"), else its beam with
-    ``max_returns`` 1 (the footprint's strongest surface).  Above 1, its
-    beam (:func:`~zbuf_occlude.sensors.kinds.with_beam`) gets ``max_returns = returns``; the
-    footprint is the beam's own ``footprint_rays`` where above 1, else
-    :data:`~zbuf_occlude.sensors.beam.footprint.FOOTPRINT_RAYS`, over the beam's own ``divergence_deg``
-    (the HDL-32E preset: 0.16°, 2.79 mrad, Velodyne HDL-32E data sheet 97-0038); the range
-    resolution is the beam's ``range_resolution_m`` where above 0, else
-    :data:`RETURNS_RANGE_RESOLUTION_M`; a one-return beam's echo merging gives way to it.
-
-    Raises
-    ------
-    InvalidInputError
-        ``returns`` not a whole number in 1..:data:`~zbuf_occlude.sensors.beam.echoes.MAX_RETURNS`, or
-        above 1 for a sensor whose beam's ``divergence_deg`` is 0 (no footprint to sample), naming
-        ``option`` and the value.
-    """
-    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
-    from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
-    from zbuf_occlude.sensors.kinds import with_beam
-
-    if isinstance(returns, bool) or not isinstance(returns, int) or not 1 <= returns <= MAX_RETURNS:
-        raise InvalidInputError(f"{option} must be a whole number from 1 to {MAX_RETURNS} (returns per pulse), got {returns!r}")
-    beam = sensor.beam
-    if returns == 1:  # one return per pulse: a beam of several (an airborne preset's) keeps its footprint's strongest surface
-        return with_beam(sensor, max_returns=1, return_mode="all", range_resolution_m=0.0) if beam.max_returns > 1 else sensor
-    if not beam.divergence_deg > 0:
-        raise InvalidInputError(f"{option} {returns}: sensor {sensor.name} has no beam divergence (its beam's divergence_deg 0) to "
-                                "sample a footprint over; give a sensor file whose \"beam\" has a divergence_deg")  # fmt: skip
-    rays = beam.footprint_rays if beam.footprint_rays > 1 else FOOTPRINT_RAYS
-    resolution = beam.range_resolution_m if beam.range_resolution_m > 0 else RETURNS_RANGE_RESOLUTION_M
-    return with_beam(sensor, max_returns=returns, footprint_rays=rays, range_resolution_m=resolution, echo_separation_m=0.0)
-
-
-def _returns_spec(sensor) -> dict[str, Any]:
-    """What ``settings.json`` records of the multi-return model (the sensor's every field is there too, ``sensor_spec``)."""
+def _returns_spec(sensor, returns: int | str) -> dict[str, Any]:
+    """What ``settings.json`` records of the returns the lidar set keeps (the sensor's every field is there too,
+    ``sensor_spec``): the beam's returns, and ``kept`` where ``returns`` is a name (first, last, all)."""
     beam = sensor.beam
     return {"max_returns": int(beam.max_returns), "footprint_rays": int(beam.footprint_rays), "divergence_deg": float(beam.divergence_deg),
-            "range_resolution_m": float(beam.range_resolution_m), "profile": beam.profile}  # fmt: skip
+            "range_resolution_m": float(beam.range_resolution_m), "profile": beam.profile,
+            **({"kept": returns, "return_mode": beam.return_mode} if isinstance(returns, str) else {})}  # fmt: skip
 
 
 def _elevation_range(value, name: str) -> tuple[float, float]:
