@@ -572,6 +572,23 @@ def test_fit_sensor_says_what_it_reads_and_fits_before_and_after_the_fit(tmp_pat
     assert said[fit_at + 1].startswith("fitted hdl32e in")  # ... and one after it
 
 
+def test_the_fit_takes_one_return_a_pulse_and_the_lidar_set_keeps_its_returns(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--returns 2 --fit-sensor``: the sensor is fitted to the real scans (one return a pulse) from the preset as it is,
+    and the lidar set's crops keep up to two returns a pulse."""
+    import zbuf_occlude.experiments.sim2real.run as s2r
+    from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
+    from zbuf_occlude.sensors import lidar_preset
+
+    fitted_from: list = []
+    _fit_spy(monkeypatch)
+    spy = s2r._fit_sensor
+    monkeypatch.setattr(s2r, "_fit_sensor", lambda scans, sensor, *a: fitted_from.append(sensor) or spy(scans, sensor, *a))
+    config = Sim2RealConfig(_mesh_root(tmp_path), _real_root(tmp_path), label_map={"Trunk": "pole"}, fit_sensor=True, points=32, returns=2)
+    assert config.sensor.beam.max_returns == 2 and config.identity()["lidar_returns"]["max_returns"] == 2
+    s2r.prepare_sets(config)
+    assert fitted_from == [lidar_preset("hdl32e")]
+
+
 def _box_scan(distance: float, seed: int) -> np.ndarray:
     from zbuf_occlude.sensors import lidar_preset, scan
 

@@ -105,13 +105,11 @@ def test_bad_returns_exit_2_naming_the_value(tmp_path: Path, value: str, capsys:
     assert not (tmp_path / "o").exists()
 
 
-def test_several_returns_need_a_divergence_and_no_fit(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_several_returns_need_a_divergence(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert lidar_preset("hdl64e").beam.divergence_deg == 0  # its data sheet gives none
     argv = ["experiment", "sim2real", str(tmp_path), "--real", str(tmp_path), "--out", str(tmp_path / "o"), "--returns", "2"]
     assert main([*argv, "--sensor", "hdl64e"]) == 2
     assert "--returns 2" in (err := capsys.readouterr().err) and "hdl64e" in err and "divergence_deg 0" in err
-    assert main([*argv, "--fit-sensor"]) == 2
-    assert "--returns 2" in (err := capsys.readouterr().err) and "--fit-sensor" in err
     for bad in (0, 16, True, 2.0):
         with pytest.raises(InvalidInputError, match="returns"):
             Sim2RealConfig("m", "r", returns=bad)

@@ -163,7 +163,8 @@ class Sim2RealConfig:
         footprint's strongest echo); ``"first"`` or ``"last"``: the receiver's first or last echo; ``"all"``:
         what the device records; N above 1: the multi-return model (each pulse's footprint cast as
         sub-rays, its hits resolved into up to N echoes).  ``settings.json``: ``lidar_returns`` where it
-        is not 1.  Only 1 with ``fit_sensor`` where it changes the sensor.
+        is not 1.  The fits (``fit_sensor``, ``fit_families``) and the fitted sets keep one return per pulse, as the
+        real scans they are fitted to record.
     footprint_cast : {"auto", "exact", "adaptive"}
         How the ``lidar`` set's crops cast a footprint whose echoes are resolved
         (:func:`~zbuf_occlude.sensors.crops.object_crops`' ``footprint``): "adaptive" casts a
@@ -219,8 +220,8 @@ class Sim2RealConfig:
         ``validate_on="fit-half"`` or ``fitted_shape`` without
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
         [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
-        ``sensor``, ``returns`` outside 1..15, above 1 with ``fit_sensor`` or with a sensor
-        without a beam divergence, a ``family_count`` out of range, a set in ``sets`` these settings
+        ``sensor``, ``returns`` not one of :func:`~zbuf_occlude.sensors.request.kept_returns`' choices, or
+        above 1 with a sensor without a beam divergence, a ``family_count`` out of range, a set in ``sets`` these settings
         do not make), naming the field or its option.
     """
 
@@ -258,6 +259,8 @@ class Sim2RealConfig:
     sets: tuple[str, ...] = ()
     option_names: InitVar[Mapping[str, str] | None] = None
     occluded_elevation_from: str = field(init=False, default="option")
+    #: The sensor as given (``sensor`` is it with ``returns`` kept): the fits take it with one return a pulse.
+    given_sensor: Any = field(init=False, default=None, repr=False, compare=False)
 
     def __post_init__(self, option_names: Mapping[str, str] | None) -> None:
         from zbuf_occlude.learn.training import OPTIMISER_DEFAULTS, RECIPES, SELECT_CHOICES
@@ -367,12 +370,8 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
                                     f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
         object.__setattr__(self, "returns", check_kept_returns(self.returns, n("returns")))
-        kept = kept_returns(sensor, self.returns, names={"max_returns": n("returns")})
-        object.__setattr__(self, "sensor", kept)
-        if kept is not sensor and self.returns != 1 and self.fit_sensor:
-            # the fit (sensors.fit.fit_lidar) fits a one-return sensor; its fitted sets would not have the returns
-            raise InvalidInputError(f"{n('returns')} {self.returns} is for the lidar set's preset or file; "
-                                    f"drop {n('fit_sensor')} or {n('returns')}")  # fmt: skip
+        object.__setattr__(self, "given_sensor", sensor)
+        object.__setattr__(self, "sensor", kept_returns(sensor, self.returns, names={"max_returns": n("returns")}))
         from zbuf_occlude.sensors.request import ScanRequest
 
         # the lidar set's request: its sensor with the returns, and the cast checked against them

@@ -45,6 +45,7 @@ from zbuf_occlude.learn.data import CloudSet, split_validation
 from zbuf_occlude.learn.metrics import classification_report
 from zbuf_occlude.mesh.families.fitted import FamiliesFit
 from zbuf_occlude.mesh.sizes import SizeRange
+from zbuf_occlude.sensors.request import kept_returns
 
 __all__ = ["Sim2RealSets", "run_sim2real", "prepare_sets", "run_seed", "write_outputs"]
 
@@ -241,7 +242,9 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     from zbuf_occlude.real_scans.datasets import load_real_scans
 
     say = say or log.info
+    # the lidar set's sensor; the fits take it with one return per pulse, as the real scans they are fitted to were recorded
     lidar, n_points, label_map = config.sensor, config.n_points, dict(config.label_map)
+    one_return = kept_returns(config.given_sensor, 1)
     say(f"reading the real scans of {config.real}")
     scans = load_real_scans(config.real, **config.real_options)  # first: cheap, and classes="real" needs them
     wanted = _classes(config.classes, config.mesh_root, scans, label_map)
@@ -262,7 +265,7 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
         first_half = {c: [scans[kept[i]].points for i in half_a if real_y[i] == k] for k, c in enumerate(names)}
         say(f"fitting the procedural families to the first half's crops: {len(half_a)} scans")
         by_class = {c: [m for m in meshes if m.class_name == c] for c in names}
-        family_fit = fit_families(first_half, lidar, sizes, seed=FAMILIES_SEED, meshes=by_class,
+        family_fit = fit_families(first_half, one_return, sizes, seed=FAMILIES_SEED, meshes=by_class,
                                   fitted_on=f"the first half of {config.real}: {len(half_a)} scans")  # fmt: skip
         added, skipped_families = check_lidar_meshes(family_meshes(family_fit, config.family_count, FAMILIES_SEED), lidar,
                                                      sizes, n_points, min_returns=int(config.min_returns))  # fmt: skip
@@ -279,7 +282,7 @@ def prepare_sets(config: Sim2RealConfig, *, say: Callable[[str], None] | None = 
     say(f"fitting {lidar.name} to the sensor-frame points of the fit half: {len(half_a)} scans, {n_returns} returns "
         "(the longest stage before training)")  # fmt: skip
     t0 = time.perf_counter()
-    fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], lidar, real_y[half_a], names)
+    fitted, placement, fitted_sizes, fit_json = _fit_sensor([scans[kept[i]] for i in half_a], one_return, real_y[half_a], names)
     say(f"fitted {fitted.name} in {time.perf_counter() - t0:.0f} s; trying each mesh with it")
     meshes, skipped_fitted = check_lidar_meshes(meshes, fitted, sizes, n_points, min_returns=int(config.min_returns))
     placement = CropPlacement.from_keywords(_fitted_placement(config, placement))
