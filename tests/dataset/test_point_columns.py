@@ -49,7 +49,8 @@ def returns_set(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("returns")
     sensor = tmp / "vlp16_returns.json"
     sensor.write_text(json.dumps(sensor_to_json(_returns_lidar())))
-    assert main(["farm", str(SAMPLES), "--out", str(tmp / "ds"), "--sensor", str(sensor), *FARM]) == 0
+    # every return the sensor records (a training cloud keeps one a pulse unless asked)
+    assert main(["farm", str(SAMPLES), "--out", str(tmp / "ds"), "--sensor", str(sensor), "--sensor-returns", "all", *FARM]) == 0
     return tmp / "ds"
 
 
