@@ -6,9 +6,10 @@ usage: python docs/results/sim2real/returns/second_returns.py CROPS -- experimen
 
 Loads the meshes, sizes and families as the run does (``prepare_sets``: nothing is trained, the scored half is never
 read) and scans each mesh's first CROPS placements of seed 0 (the lidar set's placements: ``CropPlacement`` over
-``LIDAR_PLACEMENT``) twice, from the same placements and scan seeds: with the run's sensor (``--returns N``) and with
-one return per pulse (``kept_returns(sensor, 1)``, the default).  Per class it prints: the object's returns per crop
-(median) with one return and with N; the share of the object's returns that are a pulse's second or later; of the
+``LIDAR_PLACEMENT``) three times, from the same placements and scan seeds: with the run's sensor (``--returns N``),
+with its footprint at one return per pulse (the strongest surface), and with the sensor as given at one return per
+pulse (``kept_returns(sensor, 1)``, the default: the preset's one ray).  Per class it prints: the object's returns per
+crop (median) with each; the share of the object's returns that are a pulse's second or later; of the
 pulses whose first return is on the object, the share with a later return and where that return lands (the object
 itself, the ground, nothing: the crop keeps the object's returns only, so a later return on the ground is lost to
 the cloud); the median range gap between a pulse's first return and its later one on the object; and the share of
@@ -54,18 +55,19 @@ def main() -> None:
     if config.sensor.beam.max_returns < 2:
         raise SystemExit("give the run's --returns N with N above 1")
     sets = sim2real_run.prepare_sets(config, say=print)
-    sizes, placement, one = sets.sizes(config.sizes), CropPlacement(), kept_returns(config.sensor, 1)
+    sizes, placement = sets.sizes(config.sizes), CropPlacement()
+    one, footprint_one = kept_returns(config.given_sensor, 1), kept_returns(config.sensor, 1)
     print(f"sensor {config.sensor.name}: {config.sensor.beam.max_returns} returns a pulse, {config.sensor.beam.footprint_rays} sub-rays")
     rows: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for entry in sets.meshes:
         dist, _ = placement.crop_distributions(entry, sizes[entry.class_name])
         kw = {"name": entry.name, "n_samples": crops, "seed": 0, "class_name": entry.class_name, "frame": "sensor"}
-        for (_, several, _), (_, single, _) in zip(
-            object_crops(entry.mesh, config.sensor, dist, **kw), object_crops(entry.mesh, one, dist, **kw)
-        ):
+        scans = (object_crops(entry.mesh, sensor, dist, **kw) for sensor in (config.sensor, footprint_one, one))
+        for (_, several, _), (_, strongest, _), (_, single, _) in zip(*scans):
             got = _pulses(several)
             row = rows[entry.class_name]
             row["one"].append(len(single.scan))
+            row["footprint_one"].append(len(strongest.scan))
             for key, value in got.items():
                 row[key].append(value)
     for name in sets.names:
@@ -76,8 +78,9 @@ def main() -> None:
         gaps = [g for gs in r["gaps"] for g in gs]
         first = np.sum(r["first_fifths"], axis=0)
         later = np.sum(r["later_fifths"], axis=0)
-        print(f"{name:10s} {len(r['returns']):3d} crops; object returns per crop {np.median(r['one']):.0f} with one return, "
-              f"{np.median(r['returns']):.0f} with {config.sensor.beam.max_returns}; later returns {100 * share:.1f} % of the "
+        print(f"{name:10s} {len(r['returns']):3d} crops; object returns per crop {np.median(r['one']):.0f} as given, "
+              f"{np.median(r['footprint_one']):.0f} with the footprint at one a pulse, {np.median(r['returns']):.0f} with "
+              f"{config.sensor.beam.max_returns}; later returns {100 * share:.1f} % of the "
               f"object's; pulses first on the object with a later return {100 * with_later / max(pulses, 1):.1f} %, the later "
               f"return on the object {on_obj}, on the ground {on_ground}, elsewhere {max(with_later - on_obj - on_ground, 0)}; "
               f"gap behind the first (object) {np.median(gaps) if gaps else float('nan'):.2f} m; "
