@@ -53,16 +53,16 @@ def check_max_returns(text: str, option: str) -> int:
 def returns_per_pulse(text: str, option: str) -> int | str:
     """``--returns WHICH``: a whole number of returns per pulse, or one of
     :data:`~zbuf_occlude.sensors.request.KEPT_RETURNS` (:func:`~zbuf_occlude.sensors.request.check_kept_returns`)."""
+    from zbuf_occlude.sensors.beam.echoes import MAX_RETURNS
     from zbuf_occlude.sensors.request import KEPT_RETURNS, check_kept_returns
 
     word = text.strip().lower()
-    if word in KEPT_RETURNS:
-        return word
     try:
-        return check_kept_returns(count(None)(text, option), option)
+        return check_kept_returns(word if word in KEPT_RETURNS else count(None)(text, option), option)
     except InvalidInputError:
         raise InvalidInputError(
-            f"{option} must be a whole number of returns per pulse (1 to 15) or one of {', '.join(KEPT_RETURNS)}, got {shown(text)}"
+            f"{option} must be a whole number of returns per pulse (1 to {MAX_RETURNS}) or one of {', '.join(KEPT_RETURNS)}, "
+            f"got {shown(text)}"
         ) from None
 
 
