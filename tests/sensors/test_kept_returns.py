@@ -71,7 +71,7 @@ def test_one_return_of_a_multi_return_beam_is_its_footprints_strongest_surface()
 @pytest.mark.parametrize("bad", [0, 16, True, 2.0, "second", None, [1]])
 def test_a_bad_choice_is_refused_by_its_kind_not_its_value(bad) -> None:
     with pytest.raises(InvalidInputError, match=r"^--x must be a whole number from 1 to 15 \(returns per pulse\) or one of strongest"):
-        kept_returns(SENSORS["hdl32e"], bad, names={"max_returns": "--x"})
+        kept_returns(SENSORS["hdl32e"], bad, names={"returns": "--x"})
     if isinstance(bad, str):
         with pytest.raises(InvalidInputError) as caught:
             check_kept_returns(bad, "sensor_returns")

@@ -36,7 +36,7 @@ from zbuf_occlude.mesh.paths import SPLITS
 from zbuf_occlude.mesh.scene import UP_CHOICES
 from zbuf_occlude.sensors.beam.footprint import MAX_DIVERGENCE_DEG
 from zbuf_occlude.sensors.placement import CropDistributions, check_across_sight_width
-from zbuf_occlude.sensors.request import TRAINING_RETURNS, check_kept_returns, kept_returns
+from zbuf_occlude.sensors.request import TRAINING_RETURNS
 
 if TYPE_CHECKING:  # annotations only: inputs imports nothing from here
     from zbuf_occlude.mesh.inputs.plan import FarmObject
@@ -95,13 +95,7 @@ CROP_OPTION_NAMES = {field: OPTION_NAMES[SENSOR_KEYS[field]] for field in FARM_C
 #: ``farm``'s option of each field of its :class:`~zbuf_occlude.sensors.request.ScanRequest`, for the request's messages.
 FARM_REQUEST_NAMES = {"footprint_cast": OPTION_NAMES["sensor_adaptive_footprint"], "footprint": OPTION_NAMES["sensor_footprint"],
                       "footprint_rays": OPTION_NAMES["sensor_footprint"], "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
-                      "max_returns": "a sensor file's max_returns"}  # fmt: skip
-#: How :func:`~zbuf_occlude.sensors.request.kept_returns` names ``farm``'s returns option and the footprint it casts.
-_RETURNS_NAMES = {
-    "max_returns": OPTION_NAMES["sensor_returns"],
-    "footprint": "a footprint",
-    "divergence_deg": OPTION_NAMES["sensor_divergence_deg"],
-}
+                      "max_returns": "a sensor file's max_returns", "returns": OPTION_NAMES["sensor_returns"]}  # fmt: skip
 #: ``farm --sensor``'s placement when no option changes it.
 FARM_CROP_DISTRIBUTIONS = CropDistributions(
     distance_m=DEFAULT_SENSOR_DISTANCE_M, height_m=DEFAULT_SENSOR_HEIGHT_M, size_m=DEFAULT_SENSOR_SIZE_M
@@ -204,15 +198,9 @@ class SensorCropParams:
         if self.across_sight_width_m is not None:
             option = (option_names or {}).get("across_sight_width_m") or OPTION_NAMES["sensor_across_sight_width_m"]
             object.__setattr__(self, "across_sight_width_m", check_across_sight_width(self.across_sight_width_m, option))
-        if self.returns is not None:  # None where it changes nothing: the card records it only where it does
-            from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
-
-            base = sensor_from_name(self.name)
-            returns = check_kept_returns(self.returns, OPTION_NAMES["sensor_returns"])
-            changes = kind_of(base).pulsed and kept_returns(base, returns, names=_RETURNS_NAMES) is not base
-            object.__setattr__(self, "returns", returns if changes else None)
-        sensor = self.model()  # raises InvalidInputError naming an unknown sensor, or physics it has not (a depth camera)
-        object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, sensor.beam))  # one value for one cast
+        request = self.request()  # raises InvalidInputError naming an unknown sensor, or physics it has not (a depth camera)
+        object.__setattr__(self, "returns", request.returns)  # None where it changes nothing: the card records it only where it does
+        object.__setattr__(self, "footprint_cast", footprint_mode(self.footprint_cast, request.scanner.beam))  # one value for one cast
 
     def model(self):
         """The sensor of ``name`` with the beam changes of ``footprint`` and ``divergence_deg``: :meth:`request`'s scanner."""
@@ -251,10 +239,9 @@ class SensorCropParams:
             raise InvalidInputError(f"--sensor-across-sight-width measures across a spinning LiDAR's line of sight; {self.name} is not one")
         from zbuf_occlude.sensors.request import ScanRequest
 
-        if self.returns is not None:
-            sensor = kept_returns(sensor, self.returns, names=_RETURNS_NAMES)
         beam = {"footprint": self.footprint, "divergence_deg": self.divergence_deg}
-        return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast, names={**FARM_REQUEST_NAMES, "sensor": self.name})
+        return ScanRequest(sensor, beam=beam, footprint_cast=self.footprint_cast, returns=self.returns,
+                           names={**FARM_REQUEST_NAMES, "sensor": self.name})  # fmt: skip
 
     @property
     def footprint_mode(self) -> str:

@@ -139,7 +139,7 @@ def kept_returns(sensor, returns: int | str = TRAINING_RETURNS, *, names: Mappin
         by its range resolution (or :data:`RETURNS_RANGE_RESOLUTION_M`).
 
     Every change is made by :func:`beam_changes`, the rule of ``scan``'s beam options, naming the fields as ``names`` maps
-    them (``max_returns`` is the caller's option for ``returns``).
+    them (``names["returns"]``: the caller's option for ``returns``).  :class:`ScanRequest` calls it for its ``returns``.
 
     Raises
     ------
@@ -154,7 +154,7 @@ def kept_returns(sensor, returns: int | str = TRAINING_RETURNS, *, names: Mappin
         **(names or {}),
     }
     n = namer(names)
-    returns = check_kept_returns(returns, n("max_returns"))
+    returns = check_kept_returns(returns, n("returns"))
     beam = sensor.beam
     if returns == "all":
         return sensor
@@ -174,7 +174,7 @@ def kept_returns(sensor, returns: int | str = TRAINING_RETURNS, *, names: Mappin
     try:
         changes = beam_changes(beam, given, sensor=str(getattr(sensor, "name", "the sensor")), names=names)
     except InvalidInputError as exc:
-        raise InvalidInputError(f"{n('max_returns')} {returns}: {exc}") from None
+        raise InvalidInputError(f"{n('returns')} {returns}: {exc}") from None
     return with_beam(sensor, **changes) if changes else sensor
 
 
@@ -209,6 +209,10 @@ class ScanRequest:
         Sweeps scanned one after another (a trajectory must last them).
     formats : tuple of str
         The output's file formats (``"las"`` and ``"laz"``: :data:`LAS_FORMATS`).
+    returns : int, str or None
+        What the scanner keeps of each pulse's returns (:func:`kept_returns`: 1 or "strongest", "first", "last", "all", N),
+        applied before the beam changes; None: what the device records.  Held as None where the sensor records that
+        already (a spinning preset's one return), so a request that changes nothing equals one that asks nothing.
     las : mapping of str to value
         The LAS/LAZ files' keywords of :meth:`~zbuf_occlude.sensors.scan_data.Scan.to_las_bytes` (``crs``, ``class_map``,
         ``gps_start_s``, ``origin_m``: held checked, as 3 numbers).
@@ -229,8 +233,8 @@ class ScanRequest:
     InvalidInputError
         Naming the fields as ``names`` maps them: what :func:`~zbuf_occlude.sensors.kinds.sensor_from_name` and
         :func:`~zbuf_occlude.sensors.platform.load_trajectory` refuse of a sensor or a trajectory given by name; an unknown backend or format, sweeps that are not a whole
-        number from 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`; beam changes, a footprint cast or surface optics for a
-        sensor without a beam (a depth camera); what :func:`beam_changes` and the beam refuse; the
+        number from 1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`; beam changes, a footprint cast, returns or surface optics
+        for a sensor without a beam (a depth camera); what :func:`kept_returns`, :func:`beam_changes` and the beam refuse; the
         reflectance table with the object's own reflectivity; a transmittance above 0 without
         resolved echoes or with the z-buffer; returns asked of a beam of one ray onto opaque
         surfaces (each pulse has one return: nothing to resolve); the sensor frame for a scanner that
@@ -249,6 +253,7 @@ class ScanRequest:
     trajectory: object = None
     samples: int = 1
     formats: tuple[str, ...] = ("npz",)
+    returns: int | str | None = None
     las: Mapping[str, object] = field(default_factory=dict)
     names: Mapping[str, str | None] = field(default_factory=dict)
     scanner: object = field(init=False, repr=False, compare=False)
@@ -272,15 +277,20 @@ class ScanRequest:
             raise InvalidInputError(
                 f"a scan request changes no beam field {unknown[0]!r:.40}; the fields: {', '.join(BEAM_REQUEST_FIELDS)}"
             )
-        if not kind.pulsed and (given or self.footprint_cast is not None):
-            asked = [n(f) for f in given] + ([n("footprint_cast")] if self.footprint_cast is not None else [])
+        if not kind.pulsed and (given or self.footprint_cast is not None or self.returns is not None):
+            asked = [n(f) for f in (*given, *(("footprint_cast",) if self.footprint_cast is not None else ()),
+                                    *(("returns",) if self.returns is not None else ()))]  # fmt: skip
             raise InvalidInputError(f"{', '.join(asked)}: {label} is a {kind.title}, which has no beam to change (a pulsed LiDAR has one)")
         self._check_values()
         scanner = self.sensor
+        if self.returns is not None:  # what a pulse's record keeps, then the beam changes on it
+            returns = check_kept_returns(self.returns, n("returns"))
+            scanner = kept_returns(self.sensor, returns, names={"returns": n("returns")})
+            object.__setattr__(self, "returns", None if scanner is self.sensor else returns)
         if given:
-            changes = beam_changes(self.sensor.beam, given, sensor=str(label), names=self.names)
+            changes = beam_changes(scanner.beam, given, sensor=str(label), names=self.names)
             try:
-                scanner = with_beam(self.sensor, **changes) if changes else self.sensor
+                scanner = with_beam(scanner, **changes) if changes else scanner
             except InvalidInputError as exc:
                 raise InvalidInputError(f"{', '.join(n(f) for f in given)}: {exc}") from None
         object.__setattr__(self, "scanner", scanner)

@@ -27,7 +27,7 @@ from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam.adaptive_cast import footprint_mode
-from zbuf_occlude.sensors.request import TRAINING_RETURNS, check_kept_returns, kept_returns
+from zbuf_occlude.sensors.request import TRAINING_RETURNS, check_kept_returns
 
 if TYPE_CHECKING:  # torch is imported when a run trains
     from zbuf_occlude.learn.training import TrainConfig
@@ -369,14 +369,15 @@ class Sim2RealConfig:
             # refused here, before any scan or mesh is read: the fit (sensors.fit.fit_lidar) fits a spinning LiDAR only
             raise InvalidInputError(f"{n('fit_sensor')} fits a spinning LiDAR, but {n('sensor')} {sensor.name} is an airborne scanner: "
                                     f"drop {n('fit_sensor')} or give {n('sensor')} a spinning LiDAR")  # fmt: skip
-        object.__setattr__(self, "returns", check_kept_returns(self.returns, n("returns")))
-        object.__setattr__(self, "given_sensor", sensor)
-        object.__setattr__(self, "sensor", kept_returns(sensor, self.returns, names={"max_returns": n("returns")}))
         from zbuf_occlude.sensors.request import ScanRequest
 
-        # the lidar set's request: its sensor with the returns, and the cast checked against them
-        ScanRequest(self.sensor, footprint_cast=self.footprint_cast,
-                    names={"footprint_cast": n("footprint_cast"), "max_returns": n("returns"), "footprint_rays": None})  # fmt: skip
+        object.__setattr__(self, "returns", check_kept_returns(self.returns, n("returns")))  # as asked: settings.json says it
+        # the lidar set's request: its sensor with the returns kept, and the cast checked against them
+        request = ScanRequest(sensor, footprint_cast=self.footprint_cast, returns=self.returns,
+                              names={"footprint_cast": n("footprint_cast"), "returns": n("returns"), "max_returns": n("returns"),
+                                     "footprint_rays": None})  # fmt: skip
+        object.__setattr__(self, "given_sensor", sensor)
+        object.__setattr__(self, "sensor", request.scanner)
 
     @property
     def footprint_mode(self) -> str:
