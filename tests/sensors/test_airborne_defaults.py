@@ -1,5 +1,5 @@
-"""An airborne preset out of the box: every echo it keeps reads at least one count, one surface's intensities spread as a
-real receiver's do, and an optic given alone leaves the other to the material table."""
+"""An airborne preset out of the box: every echo it keeps reads at least its receiver's floor (12 counts, the IGN RIEGL
+receiver's weakest echo), one surface's intensities spread as a real receiver's do, and an optic given alone leaves the other to the material table."""
 
 from __future__ import annotations
 
@@ -28,7 +28,9 @@ def plot():
 def test_no_kept_echo_reads_zero_and_the_ground_spreads_as_a_receivers_do(plot, name: str) -> None:
     las = _las(plot, airborne_preset(name))
     intensity = np.asarray(las.intensity, np.float64)
-    assert len(las) > 400 and intensity.min() >= 1  # the detection floor: one count
+    assert len(las) > 400 and intensity.min() >= 12  # the detection floor: the IGN receiver's weakest echo, 12 counts
+    beam = airborne_preset(name).beam
+    assert beam.detection_threshold * beam.intensity_scale == pytest.approx(12.0)
     ground = intensity[(np.asarray(las.classification) == 2) & (np.asarray(las.number_of_returns) == 1)]
     p5, p95 = np.percentile(ground, [5, 95])
     assert 1.85 <= p95 / p5 <= 5.55  # the IGN sample's single ground returns: 87 / 326, 3.7, ± 50 %

@@ -37,9 +37,10 @@ __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]
 # "Virtual laser scanning with HELIOS++", Remote Sens. Environ. 269, 112772), 1/e² full angles.
 # Range resolution: half the pulse length, c·τ/2 (4 ns: 0.60 m), or the data sheet's vertical
 # discrimination where it gives one (ALS50-II: 3.5 m).  Sub-rays: 19 per pulse, the count at which
-# a tree's multi-return share settles within a few points (docs/results/returns.md).  Detection: the receiver's
-# quantisation floor, one count (an echo that would read 0 counts is noise, not a return; fit-sensor measures a
-# real receiver's higher floor, 23 counts on the IGN sample).  Power noise: σ = 0.3 of the natural log of each
+# a tree's multi-return share settles within a few points (docs/results/returns.md).  Detection: the weakest echo the
+# RIEGL receiver of the IGN LiDAR HD sample records, 12 counts on the scale below (the file's least intensity; its
+# receiver keeps nothing weaker, so neither does the preset; fit-sensor's estimate of the same floor, from the
+# echoes' distribution, is 23 counts).  Power noise: σ = 0.3 of the natural log of each
 # firing's received power, a spread of about 30 % in the intensity of one surface (speckle averaged over the receiver's
 # aperture, and the reflectance of natural ground varying from spot to spot): an ASSUMPTION, chosen before any
 # comparison and not fitted (the IGN sample's single ground returns, p95 / p5 = 3.7, would give 0.4 by the same
@@ -49,15 +50,16 @@ __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]
 # per echo"); for the Leica and Optech scanners the same scale is an ASSUMPTION.
 _SUBRAYS = 19
 _IGN_COUNTS = 1.67e9
+_IGN_FLOOR_COUNTS = 12.0
 _POWER_NOISE = 0.3
 _FOUR_NS_M = 0.5 * 299_792_458.0 * 4e-9  # c·τ/2 of a 4 ns pulse: 0.5996 m
 
 
 def _airborne_beam(name: str, source: str, **fields) -> Beam:
-    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN intensity scale, a detection
-    threshold of one count and a power noise of 0.3 (comment above)."""
+    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN intensity scale, the IGN
+    receiver's detection floor of 12 counts and a power noise of 0.3 (comment above)."""
     fields = {"wavelength_nm": 1064.0, "footprint_rays": _SUBRAYS, "intensity_scale": _IGN_COUNTS,
-              "detection_threshold": 1.0 / _IGN_COUNTS, "power_noise": _POWER_NOISE, **fields}  # fmt: skip
+              "detection_threshold": _IGN_FLOOR_COUNTS / _IGN_COUNTS, "power_noise": _POWER_NOISE, **fields}  # fmt: skip
     return Beam(name, source=source, **fields)
 
 
