@@ -120,13 +120,8 @@ def test_the_reflectance_table_looks_up_each_faces_file_material_first(box_obj: 
         glass = optics.face_reflectivity[own][file_names == named]
         assert np.all(glass == MATERIALS[named].reflectance[0]) and np.all(optics.face_transmittance[own][file_names == named] > 0)
         # what a scan weighs its hits by: per face, from the table
-        rho, tau, gaps = surface_optics(built, "table", "table", wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=True)
+        rho, tau = surface_optics(built, "table", "table", wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=True)
         assert np.array_equal(rho, optics.face_reflectivity) and np.array_equal(tau, optics.face_transmittance)
-        # a crown's gap fraction lies in cells; a pane's transmittance is a share of every sub-ray
-        if named == "foliage":
-            assert np.array_equal(gaps, optics.face_material == rows.index("foliage"))
-        else:
-            assert gaps is None
         # an object's material given by id overrides its file's
         forced = scene_optics(built, materials={1: "metal"})
         assert np.all(forced.face_material[own] == rows.index("metal"))
@@ -145,11 +140,10 @@ def test_a_warped_object_keeps_its_faces_materials(box_obj: Path) -> None:
 
 def test_per_object_values_still_apply_to_every_face_of_the_object(box_obj: Path) -> None:
     built = _scene(_loaded(box_obj)).build()
-    rho, tau, gaps = surface_optics(built, [0.2, 0.7], [0.0, 0.5], wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=True)
+    rho, tau = surface_optics(built, [0.2, 0.7], [0.0, 0.5], wavelength_nm=SPINNING_WAVELENGTH_NM, multi_return=True)
     assert np.array_equal(rho, np.where(built.face_object == 1, 0.7, 0.2)) and np.array_equal(
         tau, np.where(built.face_object == 1, 0.5, 0.0)
     )
-    assert gaps is None  # no crown: a number is a share of every sub-ray's energy
 
 
 def test_a_scene_file_naming_an_obj_and_a_glb_scans_their_glass_and_foliage(box_obj: Path, tree_glb: Path) -> None:

@@ -70,7 +70,7 @@ SUBRAY_PAIR_BYTES = 24
 def _surface_optics(built: BuiltScene, beam: Beam, backend: str, reflectivity, transmittance):
     """A pulsed scan's ``reflectivity`` and ``transmittance`` per face (:func:`~zbuf_occlude.sensors.beam.echo_energy.surface_optics` at the beam's wavelength)."""
     if reflectivity is None and transmittance is None:
-        return None, None, None
+        return None, None
     return surface_optics(
         built, reflectivity, transmittance, wavelength_nm=beam.wavelength_nm, multi_return=beam.resolves_echoes, backend=backend
     )
@@ -364,14 +364,14 @@ def fire_pulses(
                  hint="take fewer footprint_rays, or scan fewer pulses (a sector, a smaller square)")  # fmt: skip
     multi, adaptive = beam.resolves_echoes, adaptive_footprint(footprint, beam, backend)
     d_world = pulses.directions
-    rho, tau, gaps = _surface_optics(built, beam, backend, *optics)
+    rho, tau = _surface_optics(built, beam, backend, *optics)
     if rho is None and pulses.default_reflectivity is not None and beam.detection_threshold > 0:
         rho = np.full(len(built.face_object), float(pulses.default_reflectivity))
     radiometry = None if rho is None else Radiometry(rho, beam.detection_threshold, beam.power_noise, rng)
     most = beam.max_returns if beam.return_mode == "all" else MAX_RETURNS
     if adaptive:  # the centre rays first; the footprints that are not one plane cast in full
         hit, face, t, power, uniform = adaptive_echo_returns(
-            built, beam, pulses, max_returns=most, radiometry=radiometry, transmittance=tau, gaps=gaps
+            built, beam, pulses, max_returns=most, radiometry=radiometry, transmittance=tau
         )
         meta["footprint_uniform_share"] = float(uniform.mean()) if len(uniform) else 0.0
     else:
@@ -383,7 +383,7 @@ def fire_pulses(
         if not adaptive:
             hit, face, t, power = echo_returns(
                 built, rays, face, t, beam, max_returns=most, radiometry=radiometry,
-                through=None if tau is None else Transmission(tau, origin, gaps=gaps),
+                through=None if tau is None else Transmission(tau, origin),
             )  # fmt: skip
         if beam.return_mode != "all":
             chosen = returns_of_mode(hit, power, beam.return_mode)

@@ -340,7 +340,6 @@ def adaptive_echo_returns(
     max_returns: int,
     radiometry: Radiometry | None = None,
     transmittance: NDArray[np.float64] | None = None,
-    gaps: NDArray[np.bool_] | None = None,
     neighbours: NDArray[np.int64] | None = None,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
     """:func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns` of ``pulses`` fired with ``beam``, the uniform footprints' echoes from their plane.
@@ -363,8 +362,6 @@ def adaptive_echo_returns(
         As :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns`: ρ per face, threshold, power noise (one draw per pulse).
     transmittance : (F,) float64, optional
         Round-trip transmittance per face (:func:`~zbuf_occlude.sensors.beam.echo_energy.surface_optics`); None: opaque.
-    gaps : (F,) bool, optional
-        The faces whose gaps are cells (:class:`~zbuf_occlude.sensors.beam.echo_energy.Transmission`); None: none.
     neighbours : (P, m) int64, optional
         Default :func:`pulse_neighbours`.
 
@@ -404,7 +401,7 @@ def adaptive_echo_returns(
     sub_face, sub_t = cast_embree(mesh, origins, rays)
     cast = echo_returns(
         built, rays, sub_face, sub_t, beam, max_returns=max_returns, radiometry=radiometry,
-        through=None if tau is None else Transmission(tau, origins, gaps=gaps),
+        through=None if tau is None else Transmission(tau, origins),
     )  # fmt: skip
     pulse = np.concatenate([plane.pulse, full[cast[0]]])
     order = np.argsort(pulse, kind="stable")  # a pulse's echoes all come from one part, in range order

@@ -3,9 +3,6 @@
 Where a scan casts every hit along a sub-ray (surfaces that transmit: foliage as a gap fraction, a
 mesh fence, a pane), :func:`~zbuf_occlude.sensors.beam.echo_energy.echo_returns` weighs each hit's energy
 (:func:`~zbuf_occlude.sensors.beam.echoes.hit_energy`) by :func:`attenuate_along_subray` before resolving echoes.
-A surface whose gaps are places, not a share of every sub-ray's energy (a crown's foliage: leaves and the
-holes between them), is a mosaic of cells that are leaf or gap (:func:`gap_cells_open`): a sub-ray that meets
-a leaf cell is stopped there and returns its echo, one that meets a gap goes on whole and returns none.
 """
 
 from __future__ import annotations
@@ -16,11 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.beam.hit_rows import hit_columns, rank_in_run, sorted_order
 
-__all__ = ["GAP_CELL_SALT", "attenuate_along_subray", "gap_cells_open"]
-
-#: Mixed into the cells' hash: the one pattern of leaf and gap cells of every scan (a tree at one place shows
-#: the same gaps to every pulse and every scan, as a real one does).
-GAP_CELL_SALT = 0x5EED_F011A6E5
+__all__ = ["attenuate_along_subray"]
 
 
 def attenuate_along_subray(
@@ -89,68 +82,3 @@ def attenuate_along_subray(
     out = np.empty(len(order))
     out[order] = factor
     return out
-
-
-def _unit_hash(cells: NDArray[np.int64], salt: int) -> NDArray[np.float64]:
-    """(M,) float64 in [0, 1): a uniform number per integer cell ``cells`` (M, 3), the same for the same cell.
-
-    The cell's three indices are mixed by odd 64-bit multipliers and the finaliser of MurmurHash3 (``fmix64``,
-    Appleby 2011), in wrapping uint64 arithmetic: the top 53 bits make the number.
-    """
-    c = cells.astype(np.uint64)  # two's complement: negative indices wrap, distinct cells stay distinct
-    h = np.uint64(salt) ^ (c[:, 0] * np.uint64(0x9E3779B97F4A7C15))
-    h = (h ^ (c[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))) * np.uint64(0xFF51AFD7ED558CCD)
-    h = (h ^ (c[:, 2] * np.uint64(0x165667B19E3779F9))) * np.uint64(0xC4CEB9FE1A85EC53)
-    h ^= h >> np.uint64(33)
-    h *= np.uint64(0xFF51AFD7ED558CCD)
-    h ^= h >> np.uint64(33)
-    h *= np.uint64(0xC4CEB9FE1A85EC53)
-    h ^= h >> np.uint64(33)
-    return (h >> np.uint64(11)).astype(np.float64) * 2.0**-53
-
-
-def gap_cells_open(points: ArrayLike, gap_fraction: ArrayLike, cell_m: float, *, salt: int = GAP_CELL_SALT) -> NDArray[np.bool_]:
-    """(M,) bool: whether each hit point lies in a gap of its surface, not on a leaf.
-
-    Space is cut into cubes of side ``cell_m`` (the world frame's grid); each cube is a gap with
-    probability ``gap_fraction`` and a leaf otherwise, drawn once from the cube's own hash, so every sub-ray,
-    pulse and scan that meets a cube finds it the same.  A surface's share of gaps is then its gap fraction
-    (the law the tests check), and the gaps are clumped at ``cell_m``: the sub-rays of one footprint that
-    fall in one cell pass or stop together, so a pulse goes on through a crown whole, in part or not at all,
-    as the returns of a real canopy show, where a gap fraction taken as a share of every sub-ray's energy
-    sends a weak echo through behind every crown hit.  The leaves are the clumps of foliage that gap-fraction
-    models of canopies describe (J. M. Chen, J. Cihlar 1995, "Plant canopy gap-size analysis theory for
-    improving optical measurements of leaf-area index", Appl. Opt. 34(27), 6211–6222: gaps between clumps,
-    not only between leaves).
-
-    Parameters
-    ----------
-    points : (M, 3) float
-        Hit points, world frame, metres, finite.
-    gap_fraction : (M,) float
-        Each hit's surface's gap fraction (its round-trip transmittance), in [0, 1].
-    cell_m : float
-        Side of a cell, metres, > 0.
-    salt : int
-        Mixed into the hash: another salt, another pattern of the same law.
-
-    Returns
-    -------
-    (M,) bool
-        True where the point's cell is a gap.
-
-    Raises
-    ------
-    InvalidInputError
-        Points not (M, 3) finite, gap fractions not (M,) in [0, 1], ``cell_m`` not a finite number > 0.
-    """
-    x = np.asarray(points, dtype=np.float64)
-    g = np.asarray(gap_fraction, dtype=np.float64)
-    if x.ndim != 2 or x.shape[1] != 3 or not np.isfinite(x).all():
-        raise InvalidInputError(f"points must be a finite (M, 3) array, got shape {x.shape}")
-    if g.shape != (len(x),) or not np.all((g >= 0) & (g <= 1)):
-        raise InvalidInputError(f"gap_fraction must be ({len(x)},) values in [0, 1], got shape {g.shape}")
-    if not (isinstance(cell_m, (int, float)) and np.isfinite(cell_m) and cell_m > 0):
-        raise InvalidInputError(f"cell_m must be a finite number > 0, got {cell_m!r:.40}")
-    cells = np.floor(x / float(cell_m)).astype(np.int64)
-    return _unit_hash(cells, salt) < g

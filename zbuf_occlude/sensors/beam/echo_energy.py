@@ -20,12 +20,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray, gap_cells_open
+from zbuf_occlude.sensors.beam.attenuation import attenuate_along_subray
 from zbuf_occlude.sensors.checks import namer, real
 from zbuf_occlude.sensors.beam.echoes import MAX_POWER_NOISE, hit_energy, resolve_echoes
 from zbuf_occlude.sensors.beam.fields import Beam
 from zbuf_occlude.sensors.raycast.embree import MAX_HITS, cast_embree_beyond, face_normals
-from zbuf_occlude.sensors.scene.materials import FOLIAGE_GAP_CELL_M
 from zbuf_occlude.sensors.scene.objects import BuiltScene
 
 __all__ = ["Radiometry", "Transmission", "check_transmittance_cast", "echo_returns", "strongest_echo", "surface_optics"]
@@ -56,11 +55,6 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
         Per face of ``built.mesh``.
     tau : (F,) float64 or None
         Per face of ``built.mesh``; None also where every value is 0 (opaque, first hits only).
-    gaps : (F,) bool or None
-        The faces of a crown (a material of :data:`~zbuf_occlude.sensors.scene.materials.CROWN_MATERIALS`, by the
-        table's lookup) that transmit: their transmittance, from the table or a number, is a gap fraction whose gaps are
-        cells of :data:`~zbuf_occlude.sensors.scene.materials.FOLIAGE_GAP_CELL_M` (:class:`Transmission`); None where
-        there are none.  Every other face's transmittance is a share of each sub-ray's energy (a pane, a fence).
 
     Raises
     ------
@@ -68,7 +62,7 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
         A string other than "table", a value out of range or of the wrong length, a
         transmittance above 0 with one return per pulse or another backend than "embree".
     """
-    from zbuf_occlude.sensors.scene.materials import CROWN_MATERIALS, MATERIALS, scene_optics
+    from zbuf_occlude.sensors.scene.materials import scene_optics
 
     table = None
     for name, value in (("reflectivity", reflectivity), ("transmittance", transmittance)):
@@ -80,18 +74,14 @@ def surface_optics(built: BuiltScene, reflectivity, transmittance, *, wavelength
     rho = None
     if reflectivity is not None:
         rho = table.face_reflectivity if isinstance(reflectivity, str) else _reflectivity_table(reflectivity, n_ids)[built.face_object]
-    tau = gaps = None
+    tau = None
     if transmittance is not None:
         tau = table.face_transmittance if isinstance(transmittance, str) else _transmittance_table(transmittance, n_ids)[built.face_object]
         if not tau.any():
             tau = None  # opaque everywhere: today's first hits
         else:
             check_transmittance_cast("above 0", resolves_echoes=multi_return, backend=backend)
-        if tau is not None:  # a crown's transmittance, from the table or a number, is its gap fraction
-            table = table or scene_optics(built, wavelength_nm)
-            crown = np.isin(table.face_material, [list(MATERIALS).index(m) for m in CROWN_MATERIALS]) & (tau > 0)
-            gaps = crown if crown.any() else None
-    return rho, tau, gaps
+    return rho, tau
 
 
 def check_transmittance_cast(shown: str, *, resolves_echoes: bool, backend: str, names: Mapping[str, str | None] | None = None) -> None:
@@ -233,20 +223,11 @@ class Transmission:
         The sub-rays' origin, world frame, metres (one, or one per sub-ray).
     max_hits : int
         Most hits cast along one sub-ray (:func:`~zbuf_occlude.sensors.raycast.embree.cast_embree_beyond`).
-    gaps : (F,) bool, optional
-        The faces whose transmittance is a gap fraction in cells (:func:`surface_optics`: a crown's foliage from the
-        table): a sub-ray meeting such a face in a gap cell goes on whole and returns no echo there, one meeting it
-        in a leaf cell returns its echo and goes no further (:func:`~zbuf_occlude.sensors.beam.attenuation.gap_cells_open`).
-        None: every transmittance is a share of each sub-ray's energy.
-    gap_cell_m : float
-        The cells' side, metres (:data:`~zbuf_occlude.sensors.scene.materials.FOLIAGE_GAP_CELL_M`).
     """
 
     transmittance: ArrayLike
     origins: ArrayLike
     max_hits: int = MAX_HITS
-    gaps: ArrayLike | None = None
-    gap_cell_m: float = FOLIAGE_GAP_CELL_M
 
 
 def echo_returns(
@@ -311,15 +292,8 @@ def echo_returns(
             )
     if tau is not None and tau.any():
         sub, f_all, r_all = cast_embree_beyond(built.mesh, through.origins, rays, face, t, tau > 0, max_hits=through.max_hits)
-        in_gap = _in_gap_cells(through, rays, n_faces, sub, f_all, r_all, tau)
-        if in_gap is None:
-            share = attenuate_along_subray(sub, r_all, f_all.astype(np.int64), tau)
-        else:  # each hit its own surface: a clumped face passes all or nothing, by its cell
-            clumped = np.asarray(through.gaps, dtype=bool)[f_all]
-            share = attenuate_along_subray(sub, r_all, np.arange(len(sub)), np.where(clumped, in_gap, tau[f_all]))
-        kept = (r_all >= min_range_m) & (r_all <= max_range_m)
-        # a gap returns no echo; a hit behind a leaf cell is not reached
-        kept = np.flatnonzero(kept if in_gap is None else kept & ~in_gap & (share > 0))
+        share = attenuate_along_subray(sub, r_all, f_all.astype(np.int64), tau)
+        kept = np.flatnonzero((r_all >= min_range_m) & (r_all <= max_range_m))
         ray, f, r, share = sub[kept], f_all[kept], r_all[kept], share[kept]
     else:
         ray = np.flatnonzero((face >= 0) & (t >= min_range_m) & (t <= max_range_m))
@@ -339,23 +313,6 @@ def echo_returns(
         min_echo_reflectance=beam.min_echo_reflectance, echo_rule=beam.echo_rule,
     )  # fmt: skip
     return echoes.pulse, f[echoes.hit], echoes.range_m, echoes.energy
-
-
-def _in_gap_cells(through: Transmission, rays, n_faces: int, sub, f_all, r_all, tau) -> NDArray[np.bool_] | None:
-    """(M,) bool: the hits of :func:`echo_returns`' cast that lie in a gap cell of a clumped face; None without such faces."""
-    if through.gaps is None:
-        return None
-    gaps = np.asarray(through.gaps)
-    if gaps.shape != (n_faces,) or gaps.dtype != np.bool_:
-        raise InvalidInputError(f"gaps must hold one bool per face of the scene ({n_faces:,}), got shape {gaps.shape} dtype {gaps.dtype}")
-    rows = np.flatnonzero(gaps[f_all])
-    in_gap = np.zeros(len(sub), dtype=bool)
-    if len(rows):
-        origins = np.asarray(through.origins, dtype=np.float64)
-        start = origins[sub[rows]] if origins.ndim == 2 else origins
-        points = start + r_all[rows, None] * np.asarray(rays, dtype=np.float64)[sub[rows]]
-        in_gap[rows] = gap_cells_open(points, tau[f_all[rows]], through.gap_cell_m)
-    return in_gap
 
 
 def returns_of_mode(pulse: ArrayLike, energy: ArrayLike, mode: str) -> NDArray[np.int64]:

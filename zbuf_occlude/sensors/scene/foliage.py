@@ -40,7 +40,6 @@ if TYPE_CHECKING:
 __all__ = [
     "FOLIAGE_KEYS",
     "LEAF_MATERIAL",
-    "LEAF_SIDE_M",
     "MAX_LEAVES",
     "MIN_LEAF_SIDE_M",
     "Foliage",
@@ -50,8 +49,6 @@ __all__ = [
     "leaf_quads",
 ]
 
-#: A grown leaf's side, metres (:class:`Foliage`'s default ``leaf_side_m``; a broadleaf's size).
-LEAF_SIDE_M = 0.1
 #: Most leaves one call adds (two triangles each): a crown asking for more is refused, naming the count.
 MAX_LEAVES = 2_000_000
 #: Smallest leaf side, metres (a conifer's needle cluster is larger): below it the count of leaves
@@ -213,7 +210,7 @@ class Foliage:
     """
 
     leaf_area_density: float
-    leaf_side_m: float = LEAF_SIDE_M
+    leaf_side_m: float = 0.1
     shell_m: float = 1.0
     keep_surface: bool = True
     seed: int = 0

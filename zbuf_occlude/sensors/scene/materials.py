@@ -31,12 +31,10 @@ Sources (short names used in :attr:`Material.source`):
 * **assumption**: no tabulated value; the figure and its reason are in the entry.
 
 Foliage transmittance is a **gap fraction, an assumption**: a crown mesh (a closed envelope or
-clumps of leaf cards) stands for a layer of leaves with gaps between them, and :data:`FOLIAGE_GAP_FRACTION`
-of the layer is gap (a leaf itself scatters what it transmits, so the pulse goes on only through the
-gaps).  Measured crown porosities span ~0.1–0.5; fit it to real scans' returns per pulse where you
-have them.  Where the table gives a face this gap fraction, its gaps are places: cells of
-:data:`FOLIAGE_GAP_CELL_M`, each a leaf or a gap (:func:`~zbuf_occlude.sensors.beam.attenuation.gap_cells_open`),
-so the sub-rays of one footprint pass or stop together where they fall in one cell.
+clumps of leaf cards) stands for a layer of leaves with gaps smaller than a sub-ray's share of the
+footprint, and :data:`FOLIAGE_GAP_FRACTION` of each sub-ray's energy goes on through it (a leaf
+itself scatters what it transmits, so the pulse goes on only through the gaps).  Measured crown
+porosities span ~0.1–0.5; fit it to real scans' returns per pulse where you have them.
 
 The scene's faces get their material from, in this order: the material the file gives that face
 (an OBJ's ``usemtl``, a glTF primitive's material: ``mesh.metadata[FACE_MATERIALS]``, kept per
@@ -60,7 +58,6 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.scene import face_materials_of
-from zbuf_occlude.sensors.scene.foliage import LEAF_SIDE_M
 
 if TYPE_CHECKING:
     from zbuf_occlude.sensors.scene.objects import BuiltScene
@@ -70,7 +67,6 @@ __all__ = [
     "CLASS_MATERIALS",
     "CROWN_MATERIALS",
     "DEFAULT_MATERIAL",
-    "FOLIAGE_GAP_CELL_M",
     "FOLIAGE_GAP_FRACTION",
     "GROUND_MATERIAL",
     "MATERIALS",
@@ -97,11 +93,6 @@ SPINNING_WAVELENGTH_NM = 905.0
 AIRBORNE_WAVELENGTH_NM = 1064.0
 #: Round-trip transmittance of a foliage surface: its gap fraction (module docstring; an assumption).
 FOLIAGE_GAP_FRACTION = 0.3
-#: Side of the cells in which a crown surface's gaps lie, metres: the side of the leaves
-#: :class:`~zbuf_occlude.sensors.scene.foliage.Foliage` grows (:data:`~zbuf_occlude.sensors.scene.foliage.LEAF_SIDE_M`),
-#: so a gap is a missing leaf (an assumption, taken from that model and not fitted to any scan;
-#: :func:`~zbuf_occlude.sensors.beam.attenuation.gap_cells_open`).
-FOLIAGE_GAP_CELL_M = LEAF_SIDE_M
 #: The materials of crown surfaces: a mesh that stands for leaves or needles with gaps between them
 #: (the rows with :data:`FOLIAGE_GAP_FRACTION`), where :attr:`Beam.foliage_dropout
 #: <zbuf_occlude.sensors.beam.fields.Beam.foliage_dropout>` loses returns.  A grown leaf is not one: it is one leaf.
