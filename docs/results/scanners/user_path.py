@@ -10,7 +10,9 @@
    one seed at a time, the LAZ read back with laspy;
 4. on the points classified high vegetation (ASPRS 5) in the LAZ: the share from pulses of several returns, the
    intensities (counts) and the median intensity of first-of-several returns over that of single returns, beside
-   the tile's own figures (laspy on the tile).
+   the tile's own figures (laspy on the tile); and of the pulses that return from high vegetation: the share that
+   end there with one return, the share that reach the ground, and how bright the ground returns behind them are
+   (their median intensity over that of the single ground returns).
 
 Prints one row per seed and the mean ± std over seeds (research data: never copied into the repository).
 """
@@ -33,6 +35,22 @@ from zbuf_occlude.experiments.returns import PLOT_TREES
 from zbuf_occlude.sensors.kinds import sensor_from_name
 
 
+def _crown_pulses(t, cls, n, i) -> dict[str, float]:
+    """Of the complete pulses that return from high vegetation (a pulse: the returns sharing a GPS time): the share with
+    one return, the share that also return from the ground (class 2), and the median intensity of those ground returns
+    over that of the single ground returns."""
+    _, inverse, count = np.unique(t, return_inverse=True, return_counts=True)
+    returns = np.zeros(len(count), np.int64)
+    np.maximum.at(returns, inverse, n)
+    crown, ground = np.zeros(len(count), bool), np.zeros(len(count), bool)
+    np.logical_or.at(crown, inverse, cls == 5)
+    np.logical_or.at(ground, inverse, cls == 2)
+    crown &= count == returns
+    behind = i[(cls == 2) & crown[inverse]]
+    return {"crown_single": float((returns[crown] == 1).mean()), "crown_ground": float(ground[crown].mean()),
+            "ground_behind": float(np.median(behind) / np.median(i[(cls == 2) & (n == 1)])) if len(behind) else float("nan")}  # fmt: skip
+
+
 def tile_figures(path: Path) -> dict[str, float]:
     """The tile's high-vegetation (class 5) multi-return share and intensity ratio, with laspy (complete pulses not required)."""
     las = laspy.read(path)
@@ -40,7 +58,7 @@ def tile_figures(path: Path) -> dict[str, float]:
     i = np.asarray(las.intensity, np.float64)
     high = cls == 5
     return {"multi_share": float((n[high] > 1).mean()), "ratio": float(np.median(i[high & (n > 1) & (r == 1)]) / np.median(i[high & (n == 1)])),
-            "intensity_median": float(np.median(i[high])), **_ground_spread(cls, n, i)}  # fmt: skip
+            "intensity_median": float(np.median(i[high])), **_ground_spread(cls, n, i), **_crown_pulses(np.asarray(las.gps_time), cls, n, i)}  # fmt: skip
 
 
 def _ground_spread(cls, n, i) -> dict[str, float]:
@@ -59,7 +77,7 @@ def plot_figures(laz: bytes) -> dict[str, float]:
     return {"points": int(high.sum()), "multi_share": float((n[high] > 1).mean()),
             "ratio": float(np.median(several) / np.median(single)) if len(several) and len(single) else float("nan"),
             "intensity_median": float(np.median(i[high])), "zero": float((i == 0).mean()), "saturated": float((i[high] == 65535).mean()),
-            **_ground_spread(cls, n, i)}  # fmt: skip
+            **_ground_spread(cls, n, i), **_crown_pulses(np.asarray(las.gps_time), cls, n, i)}  # fmt: skip
 
 
 def plot_file(seed: int, spacing_m: float = 14.0) -> dict:
@@ -111,7 +129,7 @@ def main(tile: str, bush_folder: str, seeds: int, extra: list[str]) -> None:
             f"median {row['intensity_median']:.0f}, zero {row['zero']:.3f}, saturated {row['saturated']:.3f}, ground single returns "
             f"p5/p50/p95 {row['ground_p5']:.0f}/{row['ground_p50']:.0f}/{row['ground_p95']:.0f}"
         )
-    for key in ("multi_share", "ratio", "intensity_median", "ground_spread"):
+    for key in ("multi_share", "ratio", "intensity_median", "ground_spread", "crown_single", "crown_ground", "ground_behind"):
         v = np.array([r[key] for r in rows])
         print(
             f"{key}: {v.mean():.3f} ± {v.std(ddof=1) if len(v) > 1 else 0:.3f} (tile {real[key]:.3f}; simulated / tile {v.mean() / real[key]:.3f})"
