@@ -11,6 +11,7 @@ import pytest
 
 import zbuf_occlude as zo
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
+from zbuf_occlude.sensors.kinds import with_beam
 
 
 def _las(scene, scanner, **optics) -> laspy.LasData:
@@ -48,3 +49,16 @@ def test_a_transmittance_given_alone_keeps_the_materials_reflectances(plot) -> N
     ground = lambda las: np.asarray(las.intensity)[(np.asarray(las.classification) == 2) & (np.asarray(las.number_of_returns) == 1)]  # noqa: E731
     default, with_tau, rho_1 = (np.median(ground(_las(plot, scanner, **o))) for o in ({}, {"transmittance": 0.3}, {"reflectivity": None}))
     assert with_tau == pytest.approx(default, rel=0.05) and rho_1 > 2.0 * default  # the soil's 0.33, not ρ = 1
+
+
+def test_echoes_weaker_than_the_receivers_floor_are_not_recorded(plot) -> None:
+    """A dark ground (ρ 0.012: its returns about the floor) loses the echoes the floor cuts, and only those: the same
+    scan detecting from one count keeps them, below 12 counts, and the same echoes above."""
+    preset = airborne_preset("riegl-q1560")
+    one_count = with_beam(preset, detection_threshold=1.0 / preset.beam.intensity_scale)
+    dark = {"reflectivity": [0.012, 0.3]}
+    floor, low = (np.asarray(_las(plot, s, **dark).intensity, np.float64) for s in (preset, one_count))
+    assert floor.min() >= 12 and (low < 12).sum() > 500  # the floor drops them
+    # and nothing else: the same echoes above it (an echo of 11.5 to 12 counts reads 12, but is below the floor)
+    assert np.array_equal(np.sort(low[low > 12]), np.sort(floor[floor > 12]))
+    assert (floor == 12).sum() < (low == 12).sum()
