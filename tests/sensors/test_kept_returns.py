@@ -141,3 +141,11 @@ def test_bad_returns_options_exit_2_naming_them(tmp_path: Path, capsys, argv: li
     assert cli_main(["farm", str(SAMPLES), "--out", str(tmp_path / "ds"), "--no-progress", *argv]) == 2
     assert said in capsys.readouterr().err
     assert not (tmp_path / "ds").exists()
+
+
+def test_a_farm_asking_returns_of_a_beam_without_a_divergence_is_told_its_own_option(tmp_path: Path) -> None:
+    """Several returns need a footprint, and a footprint a divergence: the farm names the option that gives one."""
+    path = tmp_path / "nodiv.json"
+    path.write_text(json.dumps({"kind": "lidar", "preset": "hdl32e", "name": "nodiv", "beam": {"divergence_deg": 0.0}}))
+    with pytest.raises(InvalidInputError, match=r"^--sensor-returns 2: .* give --sensor-divergence DEG"):
+        SensorCropParams(str(path), returns=2)

@@ -100,6 +100,10 @@ TRAINING_RETURNS = 1
 RETURNS_RANGE_RESOLUTION_M = 0.75
 
 
+#: The fields whose option :func:`kept_returns` may name in a refusal: what to keep, and the divergence a footprint needs.
+_KEPT_RETURNS_FIELDS = ("returns", "divergence_deg")
+
+
 def check_kept_returns(value: object, name: str = "returns") -> int | str:
     """``value`` as :func:`kept_returns` takes it: a whole number 1..15 (LAS's return numbers) or one of :data:`KEPT_RETURNS`,
     ``"strongest"`` as 1 (one value for one rule: settings read back compare equal).
@@ -285,7 +289,8 @@ class ScanRequest:
         scanner = self.sensor
         if self.returns is not None:  # what a pulse's record keeps, then the beam changes on it
             returns = check_kept_returns(self.returns, n("returns"))
-            scanner = kept_returns(self.sensor, returns, names={"returns": n("returns")})
+            # the caller's words for what kept_returns can ask of it (the footprint it casts is its own: "a footprint")
+            scanner = kept_returns(self.sensor, returns, names={f: self.names[f] for f in _KEPT_RETURNS_FIELDS if self.names.get(f)})
             object.__setattr__(self, "returns", None if scanner is self.sensor else returns)
         if given:
             changes = beam_changes(scanner.beam, given, sensor=str(label), names=self.names)
