@@ -42,7 +42,7 @@ def load_average() -> str:
 
 def buffers_of(surfels, camera, splat):
     """The depth and id buffers of one view, as ``surfels.visible`` draws them."""
-    points, normals, radius, _ = surfels._in_order
+    points, normals, radius, _, _ = surfels._in_order
     extrinsics = camera.extrinsics
     cam, normal = camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
     image = splat_image(cam, radius, camera.in_frustum(points), camera)

@@ -108,7 +108,7 @@ def test_a_cloud_whose_preparation_would_exhaust_memory_is_refused_first(monkeyp
     with pytest.raises(InsufficientMemoryError, match=r"preparing the splats of 800 points needs about 825 KiB.*or normals") as info:
         point_surfels(SPHERE)
     assert "\n" not in str(info.value)
-    with pytest.raises(InsufficientMemoryError, match=r"800 points needs about 175 KiB"):
+    with pytest.raises(InsufficientMemoryError, match=r"800 points needs about 456 KiB"):
         point_surfels(SPHERE, SPHERE)
     monkeypatch.setattr(resources, "available_memory", lambda: (2**21, "test budget"))
     point_surfels(SPHERE)  # what fits is prepared

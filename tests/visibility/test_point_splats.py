@@ -3,6 +3,7 @@ oracle on the shipped meshes (the figures of docs/results/point_visibility.md), 
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -93,17 +94,66 @@ def test_law_a_point_of_a_convex_shape_facing_the_camera_is_never_hidden(case):
         assert visible[facing].all(), f"{np.count_nonzero(facing & ~visible)} facing points hidden"
 
 
-def test_oriented_normals_hide_the_far_face_of_a_thin_wall():
-    # a closed plate 1/100 of the spacing thick: its two faces are one sheet to the points
+@pytest.mark.parametrize("normals", ["none", "given", "oriented"])
+def test_the_far_face_of_a_thin_wall_is_hidden(normals):
+    # a closed plate 1/50 of the spacing thick: depth cannot tell its faces apart, but each
+    # point's neighbourhood holds both (thin_wall_sides), or the normals say which is which
     plate = trimesh.creation.box(extents=(1.0, 1.0, 0.0004))
     points, face_index = zo.sample_surface(plate, 4_000, seed=2)
-    normals = plate.face_normals[face_index]
+    face_normals = plate.face_normals[face_index]
     camera = zo.camera_on_sphere(60.0, 10.0)
-    top, bottom = normals[:, 2] > 0.9, normals[:, 2] < -0.9
-    unoriented = zo.visible_mask_points(points, camera, normals=normals)
-    oriented = zo.visible_mask_points(points, camera, normals=normals, oriented=True)
-    assert unoriented[top].mean() > 0.99 and unoriented[bottom].mean() > 0.9  # cannot tell the faces apart
-    assert oriented[top].mean() > 0.99 and oriented[bottom].mean() < 0.05  # measured 0.035: gaps
+    top, bottom = face_normals[:, 2] > 0.9, face_normals[:, 2] < -0.9
+    given = None if normals == "none" else face_normals
+    visible = zo.visible_mask_points(points, camera, normals=given, oriented=normals == "oriented")
+    # measured 1.0 / 0.011 (none), 1.0 / 0.011 (given), 1.0 / 0.035 (oriented): gaps
+    assert visible[top].mean() > 0.99 and visible[bottom].mean() < 0.05
+
+
+def test_without_sides_the_two_faces_of_a_thin_wall_are_one_sheet():
+    # what the sides decide: the same plate, its points told no side, shows its far face
+    plate = trimesh.creation.box(extents=(1.0, 1.0, 0.0004))
+    points, face_index = zo.sample_surface(plate, 4_000, seed=2)
+    bottom = plate.face_normals[face_index][:, 2] < -0.9
+    surfels = zo.point_surfels(points)
+    assert surfels.sided[bottom].mean() > 0.95  # measured 0.97; the rest at the rim and in gaps
+    unsided = dataclasses.replace(surfels, sided=np.zeros(len(points), dtype=bool))
+    camera = zo.camera_on_sphere(60.0, 10.0)
+    assert surfels.visible(camera)[bottom].mean() < 0.05
+    assert unsided.visible(camera)[bottom].mean() > 0.9  # measured 0.99
+
+
+@pytest.mark.parametrize("n", [2_048, 10_000])
+def test_one_sheet_has_no_sides(sphere, n):
+    # a plane's offsets are all one; a sphere's spread evenly (one curved sheet), never in two
+    rng = np.random.default_rng(n)
+    plane = rng.uniform(size=(n, 3))
+    plane[:, 2] = 0.3 * plane[:, 0] + 0.1
+    assert not zo.point_surfels(plane).sided.any()
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
+    points, _ = zo.sample_surface(ball, n, seed=0)
+    assert zo.point_surfels(points).sided.mean() < 0.01  # measured 0.0034 and 0.0023
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    thickness=st.floats(1e-4, 0.01),
+    n=st.sampled_from([1_000, 3_000]),
+    rotation=st.integers(0, 2**31 - 1),
+)
+def test_law_a_sided_point_s_normal_points_out_of_its_wall(thickness, n, rotation):
+    from scipy.spatial.transform import Rotation
+
+    plate = trimesh.creation.box(extents=(1.0, 0.7, thickness))
+    turn = np.eye(4)
+    turn[:3, :3] = Rotation.random(random_state=rotation).as_matrix()
+    plate.apply_transform(turn)
+    points, face_index = zo.sample_surface(plate, n, seed=rotation % 1000)
+    outward = plate.face_normals[face_index]
+    surfels = zo.point_surfels(points)
+    faces = np.abs(outward @ turn[:3, 2]) > 0.9
+    assert surfels.sided[faces].mean() > 0.9  # measured 0.97 for walls up to a third of the spacing
+    wrong = np.einsum("ij,ij->i", surfels.normals, outward)[surfels.sided] <= 0.0
+    assert wrong.mean() < 0.03  # measured at most 0.017, at the rims
 
 
 def test_surfels_prepared_once_give_the_same_masks_as_the_one_shot_call(sphere):

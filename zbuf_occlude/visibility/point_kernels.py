@@ -248,7 +248,7 @@ def _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, to
 
 
 @numba.njit(cache=True, nogil=True)
-def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented, sided):  # pragma: no cover - numba
     """Per point: does the surfel that wins its pixel lie on the point's own surface?
 
     Point ``p`` is a candidate when nothing covers its pixel, when its own surfel wins, when the
@@ -259,7 +259,8 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     spacings in front of ``p`` along the camera's axis.  A candidate is visible unless it
     is seen through a gap of a surface in front (:func:`_in_a_gap`).  With ``oriented``
     normals, a point facing away from the camera whose pixel a surfel facing it wins is hidden
-    (the back of a closed surface).  With exact normals of a convex shape, every point facing
+    (the back of a closed surface).  A ``sided`` point facing away from the camera is hidden: it
+    lies on the far side of a wall whose near side holds points too.  With exact normals of a convex shape, every point facing
     the camera is visible: no other point lies in front of its tangent plane.
 
     Parameters
@@ -276,6 +277,9 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
         Normals closer than this (|cos|) are one smooth sheet.
     oriented : bool
         The normals point out of the surface consistently.
+    sided : (N,) bool
+        The point lies on one side of a thin wall, its normal pointing out of the wall
+        (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`).
 
     Returns
     -------
@@ -285,17 +289,21 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in range(cam.shape[0]):
-        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided)
     return visible
 
 
 @numba.njit(cache=True, nogil=True)
-def _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+def _decide_point(
+    p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided
+):  # pragma: no cover - numba
     """:func:`decide` for point ``p``."""
     height, width = depth.shape
     px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
     if pz <= 0.0:
         return False
+    if sided[p] and normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz > 0.0:
+        return False  # the far side of a thin wall
     i = _cell((px / pz - x0) / pix, width)
     j = _cell((py / pz - y0) / pix, height)
     if i < 0 or j < 0 or i >= width or j >= height:
@@ -328,12 +336,12 @@ def _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tole
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def decide_threaded(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented):  # pragma: no cover - numba
+def decide_threaded(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented, sided):  # pragma: no cover - numba
     """:func:`decide` on numba's threads (the same answer: each point is decided alone)."""
     pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in numba.prange(cam.shape[0]):
-        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided)
     return visible
 
 

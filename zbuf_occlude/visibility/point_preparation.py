@@ -33,6 +33,7 @@ from zbuf_occlude.geometry.normals import (
     ROBUST_SHIFT_PENALTY,
     ROBUST_SPACING_NEIGHBOUR,
 )
+from zbuf_occlude.visibility.point_kernels import COPLANAR
 from zbuf_occlude.visibility.point_neighbours import (
     grid_neighbours,
     run_in_threads,
@@ -41,7 +42,22 @@ from zbuf_occlude.visibility.point_neighbours import (
     uniform_grid,
 )
 
-__all__ = ["plane_fits", "robust_choice", "surfel_geometry"]
+__all__ = [
+    "plane_fits", "robust_choice", "surfel_geometry", "thin_wall_sides",
+    "THIN_WALL_NEIGHBOURS", "THIN_WALL_SPLIT", "THIN_WALL_LEAST_SHARE", "THIN_WALL_MOST_GAP",
+]  # fmt: skip
+
+#: Neighbours (the point included) in which :func:`thin_wall_sides` looks for a wall's two sheets.
+THIN_WALL_NEIGHBOURS = 24
+#: Least share of the neighbours' variance along the normal that the split into two sheets must
+#: explain (Otsu's between-class variance over the total): 0.75 for offsets spread evenly, as on
+#: one curved sheet; near 1 for two thin sheets.
+THIN_WALL_SPLIT = 0.9
+#: Least share of the neighbours each sheet must hold.
+THIN_WALL_LEAST_SHARE = 0.25
+#: Largest distance between the two sheets' mean offsets, in spacings: farther sheets are told
+#: apart by depth (:data:`~zbuf_occlude.visibility.point_kernels.DEPTH_SLACK` is a quarter of one).
+THIN_WALL_MOST_GAP = 1.0
 
 #: Jacobi sweeps at most per 3 x 3 plane fit; it converges in 4-6 (quadratically).
 _MAX_SWEEPS = 30
@@ -268,10 +284,94 @@ def robust_choice(
             out[i, d] = normals[bs, bc, d]
 
 
+@numba.njit(cache=True, nogil=True)
+def thin_wall_sides(points, neighbours, size, spacing, rows, normals, sided):  # pragma: no cover - numba
+    """Finds the points that lie on one side of a wall thinner than the sampling, and turns their
+    normals out of the wall.
+
+    Where a wall is thinner than the spacing, a point's neighbourhood holds both of its faces:
+    along the point's normal, its neighbours' offsets from their mean fall into two sheets.  The
+    split of the sorted offsets that explains the most of their variance (Otsu 1979, the
+    between-class variance) is taken; it is a wall when that split explains at least
+    :data:`THIN_WALL_SPLIT` of the variance, each sheet holds at least
+    :data:`THIN_WALL_LEAST_SHARE` of the neighbours and the sheets' means lie more than
+    :data:`~zbuf_occlude.visibility.point_kernels.COPLANAR` and at most
+    :data:`THIN_WALL_MOST_GAP` spacings apart.  The point's outward normal then points away
+    from the other sheet, so a view can tell the wall's near face from its far one, which
+    depth cannot (the faces lie within the depth slack).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    neighbours : (n, K) int64
+        Each point's neighbours, nearest first (itself first), ``K >= size``.
+    size : int
+        Neighbours looked at (:data:`THIN_WALL_NEIGHBOURS`), at least 4.
+    spacing : (n,) float64
+        Each point's spacing, object units.
+    rows : (first, last) int
+        The points looked at: ``first`` to ``last - 1``.
+    normals : (n, 3) float64
+        Unit normals of either sign; a wall's point's is turned to point out of the wall.
+    sided : (n,) bool
+        Written: the point lies on one side of a thin wall, its normal points out of it.
+    """
+    first, last = rows
+    offsets = np.empty(size)
+    for i in range(first, last):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        mx = my = mz = 0.0
+        for m in range(size):
+            j = neighbours[i, m]
+            mx += points[j, 0]
+            my += points[j, 1]
+            mz += points[j, 2]
+        mx /= size
+        my /= size
+        mz /= size
+        total = 0.0
+        for m in range(size):
+            j = neighbours[i, m]
+            offsets[m] = (points[j, 0] - mx) * nx + (points[j, 1] - my) * ny + (points[j, 2] - mz) * nz
+            total += offsets[m]
+        own = (points[i, 0] - mx) * nx + (points[i, 1] - my) * ny + (points[i, 2] - mz) * nz
+        offsets.sort()
+        mean = total / size
+        variance = 0.0
+        for m in range(size):
+            variance += (offsets[m] - mean) ** 2
+        variance /= size
+        best, at, low = -1.0, 0, 0.0
+        below = 0.0
+        for m in range(1, size):
+            below += offsets[m - 1]
+            mu0 = below / m
+            mu1 = (total - below) / (size - m)
+            w0 = m / size
+            between = w0 * (1.0 - w0) * (mu1 - mu0) ** 2
+            if between > best:
+                best, at, low = between, m, mu1 - mu0
+        share = at / size
+        sided[i] = (
+            variance > 0.0
+            and best >= THIN_WALL_SPLIT * variance
+            and THIN_WALL_LEAST_SHARE <= share <= 1.0 - THIN_WALL_LEAST_SHARE
+            and COPLANAR * spacing[i] < low <= THIN_WALL_MOST_GAP * spacing[i]
+        )
+        if sided[i] and own <= 0.5 * (offsets[at - 1] + offsets[at]):  # on the lower sheet
+            normals[i, 0], normals[i, 1], normals[i, 2] = -nx, -ny, -nz
+
+
 def surfel_geometry(
-    points: NDArray[np.float64], neighbours: int, *, estimate_normals: bool, workers: int = -1
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.int64]]:
-    """Each point's spacing and, when asked, its robust normal, from one neighbour search.
+    points: NDArray[np.float64],
+    neighbours: int,
+    normals: NDArray[np.float64] | None = None,
+    *,
+    sides: bool = True,
+    workers: int = -1,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.int64]]:
+    """Each point's spacing, its normal (the one given, or the robust estimate) and the side of a
+    thin wall it lies on, from one neighbour search.
 
     The points are searched and fitted in their Morton order
     (:func:`~zbuf_occlude.geometry.grouping.morton_order`), neighbours in space being neighbours
@@ -283,8 +383,12 @@ def surfel_geometry(
         At least 2 points, finite (checked by the caller).
     neighbours : int
         The k of the spacing (the distance to the k-th nearest neighbour, itself not counted).
-    estimate_normals : bool
-        Also the normals of :func:`~zbuf_occlude.geometry.normals.robust_normals` at its defaults.
+    normals : (n, 3) float64, optional
+        Unit normals of either sign (checked by the caller).  None: each point's is estimated,
+        the normals of :func:`~zbuf_occlude.geometry.normals.robust_normals` at its defaults.
+    sides : bool
+        Look for thin walls' sides (False: ``sided`` is all False and the normals are as given or
+        estimated, as for normals oriented by the caller).
     workers : int
         Threads (-1: every core the process may use, from :data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points a
         thread).
@@ -292,8 +396,10 @@ def surfel_geometry(
     Returns
     -------
     spacing : (n,) float64
-    normals : (n, 3) float64 or None
-        Unit, of arbitrary sign; None unless ``estimate_normals``.
+    normals : (n, 3) float64
+        Unit; of either sign, but turned out of the wall where ``sided``.
+    sided : (n,) bool
+        The point lies on one side of a wall thinner than the sampling (:func:`thin_wall_sides`).
     order : (n,) int64
         The Morton order of ``points`` (:attr:`~zbuf_occlude.visibility.point_splats.PointSurfels.order`).
     """
@@ -303,8 +409,9 @@ def surfel_geometry(
     order = morton_order(points)
     ordered = np.ascontiguousarray(points[order])
     k = min(neighbours, n - 1) + 1
-    sizes = sorted({min(int(s), n) for s in ROBUST_NORMAL_SCALES if min(int(s), n) >= 3}) if estimate_normals else []
-    query = max([k, *sizes])
+    sizes = sorted({min(int(s), n) for s in ROBUST_NORMAL_SCALES if min(int(s), n) >= 3}) if normals is None else []
+    wall = min(THIN_WALL_NEIGHBOURS, n) if sides else 0
+    query = max([k, wall, *sizes])
     grid = uniform_grid(ordered)
     if grid is None:
         distance, idx = tree_neighbours(ordered, query, workers)
@@ -322,23 +429,27 @@ def surfel_geometry(
 
     threads = thread_count(n, workers)
     run_in_threads(neighbourhoods, n, threads)
-    spacing = np.empty(n)
-    spacing[order] = distance[:, k - 1]
-    if not estimate_normals:
-        return spacing, None, order
-    normals = np.empty((n, 3))
-    if not sizes:
-        normals[:] = (0.0, 0.0, 1.0)
-        return spacing, normals, order
+    spacing = np.ascontiguousarray(distance[:, k - 1])
+    if normals is not None:
+        chosen = np.array(normals[order], dtype=np.float64)
+    elif sizes:
+        chosen = np.empty((n, 3))
+    else:
+        chosen = np.tile([0.0, 0.0, 1.0], (n, 1))
     scales = ROBUST_NORMAL_SCALES
-    centres = min(scales[1] if len(scales) > 1 else sizes[0], sizes[-1])
-    own_spacing = np.ascontiguousarray(distance[:, min(ROBUST_SPACING_NEIGHBOUR, sizes[-1] - 1)])
-    chosen = np.empty((n, 3))
+    centres = min(scales[1] if len(scales) > 1 else sizes[0], sizes[-1]) if sizes else 0
+    own_spacing = np.ascontiguousarray(distance[:, min(ROBUST_SPACING_NEIGHBOUR, sizes[-1] - 1)]) if sizes else spacing
+    sided = np.zeros(n, dtype=np.bool_)
 
-    def choose(first: int, last: int) -> None:
-        robust_choice(ordered, idx, own_spacing, fits, variation, centres, len(sizes) // 2, ROBUST_PLANE_TOLERANCE,
-                      ROBUST_SHIFT_PENALTY, (first, last), chosen)  # fmt: skip
+    def choose(first: int, last: int) -> None:  # a point's side needs only its own normal
+        if sizes:
+            robust_choice(ordered, idx, own_spacing, fits, variation, centres, len(sizes) // 2, ROBUST_PLANE_TOLERANCE,
+                          ROBUST_SHIFT_PENALTY, (first, last), chosen)  # fmt: skip
+        if wall >= 4:
+            thin_wall_sides(ordered, idx, wall, spacing, (first, last), chosen, sided)
 
-    run_in_threads(choose, n, threads)
-    normals[order] = chosen
-    return spacing, normals, order
+    if sizes or wall >= 4:
+        run_in_threads(choose, n, threads)
+    out_spacing, out_normals, out_sided = np.empty(n), np.empty((n, 3)), np.empty(n, dtype=np.bool_)
+    out_spacing[order], out_normals[order], out_sided[order] = spacing, chosen, sided
+    return out_spacing, out_normals, out_sided, order

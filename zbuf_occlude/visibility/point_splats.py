@@ -20,16 +20,23 @@ normals, where given), with the z-buffer test the mesh methods use:
    neighbours on one smooth sheet; a winner whose centre lies behind that plane (past a convex
    crease) does not hide the point, and a point seen through a gap of a surface in front is
    hidden (:func:`~zbuf_occlude.visibility.point_kernels.decide`).
+4. **Thin walls.**  Where a wall is thinner than the sampling (a sign's plate, a car's sheet
+   metal), its two faces lie within the depth tolerance of each other, so depth cannot tell the
+   near face from the far one.  But a point's neighbourhood then holds both faces as two
+   sheets: the preparation finds them and turns each point's normal out of its wall
+   (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`), and a view hides the
+   points of a wall's side that faces away.  Normals given as oriented keep their own sides.
 
 Compared with hidden point removal (HPR, Katz et al. 2007, Open3D's ``hidden_point_removal``) it
 needs no radius; with screen-space operators (Pintus et al. 2011) and variable-density visibility
 (Biasutti et al. 2019) it shares the idea of sizing the test from the local density.
 docs/results/point_visibility.md measures it and HPR against the exact mesh oracle.
 
-What points alone cannot tell: a wall thinner than the tolerance (a twentieth of the spacing) has both
-faces visible unless the normals are oriented (``oriented=True``: a closed, consistently wound
-surface), and points within about one spacing of an occluding edge are decided by the splat's
-reach, not by the surface, which does not show.
+What points alone cannot tell: a wall sampled on one face only, or whose two faces are too far
+apart to share a neighbourhood yet nearer than the depth tolerance, shows its far face unless
+the normals are oriented (``oriented=True``: a closed, consistently wound surface); and points
+within about one spacing of an occluding edge are decided by the splat's reach, not by the
+surface, which does not show.
 
 What float64 cannot hold is refused before any work, in one line naming the value: coordinates
 beyond :data:`MAX_SPLAT_COORDINATE` (squared distances between them would overflow), a
@@ -71,27 +78,28 @@ __all__ = [
     "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE", "BYTES_PER_THREAD", "BYTES_PER_VIEW_POINT",
 ]  # fmt: skip
 
-#: Bytes per point of :func:`point_surfels` with normals given, at its peak.  It holds the
-#: float64 points (24), the Morton order and the points in it (32), the uniform grid's cells
-#: (:func:`~zbuf_occlude.visibility.point_preparation.nearest_neighbours`: at most 4 cells a
-#: point, 40 B, in numba's allocator), the distances and indices of the k + 1 nearest neighbours
-#: (80 at k = 4), the spacing and the radius (16), the unit normals (24): 179 B at the peak by
-#: tracemalloc at 200,000 and 800,000 points on a sphere (peak RSS grew 166-175 B), plus the
-#: grid's 40 (which tracemalloc does not see); rounded up.
-BYTES_PER_SURFEL = 224
+#: Bytes per point of :func:`point_surfels` with normals given (not oriented), at its peak.  It
+#: holds the float64 points (24), the Morton order and the points in it (32), the uniform grid's
+#: cells (:func:`~zbuf_occlude.visibility.point_preparation.nearest_neighbours`: at most 4 cells a
+#: point, 40 B, in numba's allocator), the distances and indices of the
+#: :data:`~zbuf_occlude.visibility.point_preparation.THIN_WALL_NEIGHBOURS` nearest neighbours
+#: that the thin walls' sides are found in (384), the spacing and the radius (16), the unit
+#: normals in both orders (48) and the sides: 540 B at the peak by tracemalloc at 200,000 and
+#: 800,000 points on a sphere, plus the grid's 40 (which tracemalloc does not see); rounded up.
+BYTES_PER_SURFEL = 584
 #: Bytes per point the normals' estimate adds when none are given
 #: (:func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`): the 48 nearest
-#: neighbours' distances and indices instead of 5 (+688), the plane fits of three sizes (72 +
-#: 24), the chosen normals and the spacing they use (32).  816 B more than with normals,
-#: measured as above (tracemalloc's peak 994-996 B a point; peak RSS grew 995 B); rounded up.
-BYTES_PER_ESTIMATED_NORMAL = 832
+#: neighbours' distances and indices instead of 24 (+384), the plane fits of three sizes (72 +
+#: 24), less what the given normals took.  464 B more than with normals, measured as above
+#: (tracemalloc's peak 1,004-1,005 B a point); rounded up.
+BYTES_PER_ESTIMATED_NORMAL = 472
 #: Address space each thread of the neighbour search maps (from 2 threads, one per core and
 #: :data:`~zbuf_occlude.visibility.point_neighbours.POINTS_PER_THREAD` points): its stack (8 MiB,
 #: ``ulimit -s``) and the glibc malloc arena its first allocation reserves (64 MiB on 64-bit), which
 #: a limit on the address space (``ulimit -v``) counts although little of it is touched.
 BYTES_PER_THREAD = 72 << 20
 #: Bytes per point of one view (:meth:`PointSurfels.visible`) at its peak, beside the prepared
-#: cloud: the points, normals, radii and spacings gathered in Morton order once (64, kept), the
+#: cloud: the points, normals, radii, spacings and sides gathered in Morton order once (65, kept), the
 #: camera-frame points and normals (48), the frustum test, the splat image's per-point
 #: temporaries and the masks: 150 B a point by tracemalloc on the first view at 200,000 and
 #: 800,000 points on a sphere (86 on later views), plus the camera frame's 48 that numba
@@ -134,13 +142,19 @@ class PointSurfels:
     points : (N, 3) float64
         World frame.
     normals : (N, 3) float64
-        Unit normals, world frame; given, or estimated (then of arbitrary sign).
+        Unit normals, world frame; given, or estimated (then of arbitrary sign), turned out of
+        the wall where :attr:`sided`.
     spacing : (N,) float64
         Distance to the k-th nearest neighbour, object units.
     radius : (N,) float64
         Splat radius, object units (``splat_scale · spacing``).
     oriented : bool
         The normals point out of the surface consistently (given so by the caller).
+    sided : (N,) bool
+        The point lies on one side of a wall thinner than the sampling, its normal pointing out
+        of the wall (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`); found
+        unless ``oriented``.  Facing away from a camera, such a point is hidden by the wall's
+        near side.  All False where not given.
     """
 
     points: NDArray[np.float64]
@@ -148,12 +162,15 @@ class PointSurfels:
     spacing: NDArray[np.float64]
     radius: NDArray[np.float64]
     oriented: bool
+    sided: NDArray[np.bool_] = field(default=None, repr=False)  # type: ignore[assignment]
     #: (N,) int64: the Morton order of the points (:func:`~zbuf_occlude.geometry.grouping.morton_order`),
     #: in which each view is splatted and decided: neighbours in space are neighbours in memory
     #: (about 2x faster at 100,000 points than the order given).
     order: NDArray[np.int64] = field(default=None, repr=False)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
+        if self.sided is None:
+            object.__setattr__(self, "sided", np.zeros(len(self.points), dtype=np.bool_))
         if self.order is None:
             from zbuf_occlude.geometry.grouping import morton_order
 
@@ -161,10 +178,10 @@ class PointSurfels:
             object.__setattr__(self, "order", order)
 
     @functools.cached_property
-    def _in_order(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """``points``, ``normals``, ``radius``, ``spacing`` in :attr:`order`: gathered once, not per view."""
+    def _in_order(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """``points``, ``normals``, ``radius``, ``spacing``, ``sided`` in :attr:`order`: gathered once, not per view."""
         order = self.order
-        return self.points[order], self.normals[order], self.radius[order], self.spacing[order]
+        return self.points[order], self.normals[order], self.radius[order], self.spacing[order], self.sided[order]
 
     def visible(self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu") -> NDArray[np.bool_]:
         """(N,) bool: the points ``camera`` sees (module docstring), inside its frustum.
@@ -213,7 +230,7 @@ class PointSurfels:
             return in_frustum
         extrinsics = camera.extrinsics
         order = self.order
-        points, normals, radius, spacing = self._in_order
+        points, normals, radius, spacing, sided = self._in_order
         cam, normal = kernels.camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
         image = splat_image(cam, radius, in_frustum[order], camera)
         box = (image.pix, image.x0, image.y0)
@@ -224,7 +241,7 @@ class PointSurfels:
             else:
                 depth, ids = splat_surfels(cam, normal, radius, *box, image.width, image.height)
             decide = kernels.decide_threaded if threads > 1 else kernels.decide
-            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self.oriented)
+            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self.oriented, sided)
         visible = np.empty_like(decided)
         visible[order] = decided
         return visible & in_frustum
@@ -355,12 +372,13 @@ def point_surfels(
         from its neighbours, robustly next to sharp edges (the normals of
         :func:`~zbuf_occlude.geometry.normals.robust_normals`, computed by
         :func:`~zbuf_occlude.visibility.point_preparation.surfel_geometry`, which also finds the
-        spacing in the same neighbour search).
+        spacing and the sides of thin walls in the same neighbour search).  Given or estimated,
+        a thin wall's points get normals turned out of the wall (:attr:`PointSurfels.sided`).
     oriented : bool
         ``normals`` point out of a closed surface consistently (a watertight mesh wound
         consistently); then a point facing away whose pixel is won by a surface facing the camera
-        is hidden, which decides walls thinner than the tolerance.  False (default): normals of
-        either sign.  Needs ``normals``.
+        is hidden, which decides walls thinner than the tolerance, and no sides are looked for.
+        False (default): normals of either sign.  Needs ``normals``.
     neighbours : int
         The k of the spacing, the distance to the k-th nearest neighbour (default 4).
     splat_scale : float
@@ -409,9 +427,8 @@ def point_surfels(
         return PointSurfels(pts, nrm, spacing, spacing.copy(), bool(oriented))
     from zbuf_occlude.visibility.point_preparation import surfel_geometry
 
-    spacing, estimated, order = surfel_geometry(pts, k, estimate_normals=nrm is None)
-    nrm = estimated if nrm is None else nrm
-    return PointSurfels(pts, np.ascontiguousarray(nrm), spacing, scale * spacing, bool(oriented), order=order)
+    spacing, nrm, sided, order = surfel_geometry(pts, k, nrm, sides=not oriented)  # oriented: the caller's sides stand
+    return PointSurfels(pts, nrm, spacing, scale * spacing, bool(oriented), sided=sided, order=order)
 
 
 def visible_mask_points(
