@@ -256,3 +256,13 @@ def test_a_misspelt_keyword_and_a_bad_camera_are_refused():
         zo.visible_mask_points(points, zo.camera_on_sphere(0.0, 0.0), tolerence=0.1)
     with pytest.raises(ArgumentTypeError, match="camera_on_sphere"):
         zo.visible_mask_points(points, (30.0, 40.0))
+
+
+def test_sides_of_another_length_are_refused():
+    from zbuf_occlude.visibility.point_splats import PointSurfels
+
+    points = np.zeros((3, 3))
+    ones = np.ones(3)
+    with pytest.raises(InvalidInputError, match=r"sided must hold one bool per point \(3\), got shape \(2,\)"):
+        PointSurfels(points, points, ones, ones, False, sided=np.ones(2, dtype=bool))
+    assert PointSurfels(points, points, ones, ones, False, sided=[1, 0, 1]).sided.dtype == np.bool_

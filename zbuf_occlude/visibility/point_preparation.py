@@ -341,7 +341,7 @@ def thin_wall_sides(points, neighbours, size, spacing, rows, normals, sided):  #
         for m in range(size):
             variance += (offsets[m] - mean) ** 2
         variance /= size
-        best, at, low = -1.0, 0, 0.0
+        best, at, gap = -1.0, 0, 0.0
         below = 0.0
         for m in range(1, size):
             below += offsets[m - 1]
@@ -350,13 +350,13 @@ def thin_wall_sides(points, neighbours, size, spacing, rows, normals, sided):  #
             w0 = m / size
             between = w0 * (1.0 - w0) * (mu1 - mu0) ** 2
             if between > best:
-                best, at, low = between, m, mu1 - mu0
+                best, at, gap = between, m, mu1 - mu0
         share = at / size
         sided[i] = (
             variance > 0.0
             and best >= THIN_WALL_SPLIT * variance
             and THIN_WALL_LEAST_SHARE <= share <= 1.0 - THIN_WALL_LEAST_SHARE
-            and COPLANAR * spacing[i] < low <= THIN_WALL_MOST_GAP * spacing[i]
+            and COPLANAR * spacing[i] < gap <= THIN_WALL_MOST_GAP * spacing[i]
         )
         if sided[i] and own <= 0.5 * (offsets[at - 1] + offsets[at]):  # on the lower sheet
             normals[i, 0], normals[i, 1], normals[i, 2] = -nx, -ny, -nz

@@ -171,6 +171,10 @@ class PointSurfels:
     def __post_init__(self) -> None:
         if self.sided is None:
             object.__setattr__(self, "sided", np.zeros(len(self.points), dtype=np.bool_))
+        elif np.shape(self.sided) != (len(self.points),):
+            raise InvalidInputError(f"sided must hold one bool per point ({len(self.points)}), got shape {np.shape(self.sided)}")
+        else:
+            object.__setattr__(self, "sided", np.asarray(self.sided, dtype=np.bool_))
         if self.order is None:
             from zbuf_occlude.geometry.grouping import morton_order
 
