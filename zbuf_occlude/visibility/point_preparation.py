@@ -173,6 +173,18 @@ def _smallest_eigenvector(a, v, out):  # pragma: no cover - numba
     return max(low, 0.0) / total if total > 0.0 else 0.0
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _neighbourhood_mean(points, neighbours, i, k):  # pragma: no cover - numba
+    """The mean of point ``i``'s first ``k`` neighbours."""
+    mx = my = mz = 0.0
+    for m in range(k):
+        j = neighbours[i, m]
+        mx += points[j, 0]
+        my += points[j, 1]
+        mz += points[j, 2]
+    return mx / k, my / k, mz / k
+
+
 @numba.njit(cache=True, nogil=True)
 def plane_fits(points, neighbours, sizes, first, last, normals, variation):  # pragma: no cover - numba
     """The covariance (PCA) normal and surface variation of each point's first ``sizes[s]``
@@ -199,15 +211,7 @@ def plane_fits(points, neighbours, sizes, first, last, normals, variation):  # p
     for i in range(first, last):
         for s in range(count):
             k = sizes[s]
-            mx = my = mz = 0.0
-            for m in range(k):
-                j = neighbours[i, m]
-                mx += points[j, 0]
-                my += points[j, 1]
-                mz += points[j, 2]
-            mx /= k
-            my /= k
-            mz /= k
+            mx, my, mz = _neighbourhood_mean(points, neighbours, i, k)
             xx = xy = xz = yy = yz = zz = 0.0
             for m in range(k):
                 j = neighbours[i, m]
@@ -320,15 +324,7 @@ def thin_wall_sides(points, neighbours, size, spacing, rows, normals, sided):  #
     offsets = np.empty(size)
     for i in range(first, last):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        mx = my = mz = 0.0
-        for m in range(size):
-            j = neighbours[i, m]
-            mx += points[j, 0]
-            my += points[j, 1]
-            mz += points[j, 2]
-        mx /= size
-        my /= size
-        mz /= size
+        mx, my, mz = _neighbourhood_mean(points, neighbours, i, size)
         total = 0.0
         for m in range(size):
             j = neighbours[i, m]
