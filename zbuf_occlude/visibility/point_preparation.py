@@ -326,12 +326,16 @@ def thin_wall_sides(points, neighbours, size, spacing, rows, normals, sided):  #
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         mx, my, mz = _neighbourhood_mean(points, neighbours, i, size)
         total = 0.0
-        for m in range(size):
+        for m in range(size):  # the offsets, kept sorted (insertion: a few dozen values)
             j = neighbours[i, m]
-            offsets[m] = (points[j, 0] - mx) * nx + (points[j, 1] - my) * ny + (points[j, 2] - mz) * nz
-            total += offsets[m]
+            value = (points[j, 0] - mx) * nx + (points[j, 1] - my) * ny + (points[j, 2] - mz) * nz
+            total += value
+            at = m
+            while at > 0 and offsets[at - 1] > value:
+                offsets[at] = offsets[at - 1]
+                at -= 1
+            offsets[at] = value
         own = (points[i, 0] - mx) * nx + (points[i, 1] - my) * ny + (points[i, 2] - mz) * nz
-        offsets.sort()
         mean = total / size
         variance = 0.0
         for m in range(size):
