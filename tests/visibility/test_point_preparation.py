@@ -19,6 +19,7 @@ from zbuf_occlude.geometry.normals import covariance_normals, robust_normals
 from zbuf_occlude.visibility.point_neighbours import nearest_neighbours
 from zbuf_occlude.visibility.point_preparation import plane_fits as fit_planes
 from zbuf_occlude.visibility import point_preparation as prep
+from zbuf_occlude.visibility.point_kernels import COPLANAR
 from zbuf_occlude.visibility.point_preparation import surfel_geometry
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
@@ -175,7 +176,7 @@ def _thin_wall_sides(points, normals, spacing):
         (offsets.var(axis=1) > 0)
         & (between[rows, at] >= prep.THIN_WALL_SPLIT * offsets.var(axis=1))
         & (share >= prep.THIN_WALL_LEAST_SHARE) & (share <= 1 - prep.THIN_WALL_LEAST_SHARE)
-        & (gap > 1e-6 * spacing) & (gap <= prep.THIN_WALL_MOST_GAP * spacing)
+        & (gap > COPLANAR * spacing) & (gap <= prep.THIN_WALL_MOST_GAP * spacing)
     )  # fmt: skip
     lower = offsets[:, 0] <= 0.5 * (ordered[rows, at] + ordered[rows, at + 1])
     return sided, np.where((sided & lower)[:, None], -normals, normals)

@@ -123,7 +123,7 @@ def test_without_sides_the_two_faces_of_a_thin_wall_are_one_sheet():
 
 
 @pytest.mark.parametrize("n", [2_048, 10_000])
-def test_one_sheet_has_no_sides(sphere, n):
+def test_one_sheet_has_no_sides(n):
     # a plane's offsets are all one; a sphere's spread evenly (one curved sheet), never in two
     rng = np.random.default_rng(n)
     plane = rng.uniform(size=(n, 3))
