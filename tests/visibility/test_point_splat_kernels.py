@@ -5,6 +5,7 @@ neighbourhood)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 
@@ -132,3 +133,38 @@ def test_a_plate_thinner_than_the_normals_neighbourhood_shows_its_top_face():
         # measured 0.897 and 0.943 of the top face (0.825 and 0.830 without the depth slack)
         assert visible[top].mean() >= least
         assert agreement(visible, truth)["accuracy"] >= least - 0.03  # measured 0.869 and 0.900
+
+
+def _tilted_winner(normals):
+    """Point 0 faces the camera 10 away; point 1 stands 0.2 spacings in front of it and 0.6 to the
+    side, its disk (radius 0.7) tilted 30° so that it just covers point 0's pixel, about 0.5 in
+    front (camera frame); beyond that pixel point 0's own disk shows, so no gap test hides it."""
+    theta = np.radians(30.0)
+    cam = np.array([[0.0, 0.0, 10.0], [0.6, 0.0, 9.8]])
+    normal = np.array([[0.0, 0.0, -1.0], [np.sin(theta), 0.0, -np.cos(theta)]])
+    radius, spacing = np.array([1.0, 0.7]), np.ones(2)
+    box, size = (0.01, -0.5, -0.5), 100
+    depth, ids = kernels.splat_surfels(cam, normal, radius, *box, size, size)
+    assert ids[50, 50] == 1 and 10.0 - depth[50, 50] > 0.5  # the tilted disk wins point 0's pixel, far in front
+    return kernels.decide(cam, normal, radius, spacing, depth, ids, box, 0.05, 0.9, normals, np.zeros(2, dtype=bool))
+
+
+def test_with_estimated_normals_a_winner_whose_centre_is_within_the_depth_slack_is_the_points_own_sheet():
+    # an estimated normal off by 30° tilts its disk 0.55 spacings toward the camera; its centre stands 0.2 in front
+    assert _tilted_winner(kernels.NORMALS_ESTIMATED)[0]
+    # given normals are exact: the disk is the surface, and it hides the point
+    assert not _tilted_winner(kernels.NORMALS_GIVEN)[0]
+    assert not _tilted_winner(kernels.NORMALS_ORIENTED)[0]
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**31 - 1), st.floats(-80.0, 80.0), st.floats(0.0, 360.0))
+def test_estimated_normals_only_ever_add_visible_points(seed, elevation, azimuth):
+    # the winner's centre is a second depth a point may be within the slack of: never a reason to hide
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(400, 3)) * rng.uniform(0.05, 1.0, 3)
+    surfels = zo.point_surfels(points)
+    given = dataclasses.replace(surfels, estimated=False)
+    camera = zo.camera_on_sphere(elevation, azimuth)
+    estimated, exact = surfels.visible(camera), given.visible(camera)
+    assert not (exact & ~estimated).any()

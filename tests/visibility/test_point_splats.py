@@ -266,3 +266,21 @@ def test_sides_of_another_length_are_refused():
     with pytest.raises(InvalidInputError, match=r"sided must hold one bool per point \(3\), got shape \(2,\)"):
         PointSurfels(points, points, ones, ones, False, sided=np.ones(2, dtype=bool))
     assert PointSurfels(points, points, ones, ones, False, sided=[1, 0, 1]).sided.dtype == np.bool_
+
+
+def test_the_normals_are_marked_estimated_only_when_none_are_given(sphere):
+    points, normals, _ = sphere
+    assert zo.point_surfels(points[:500]).estimated
+    assert not zo.point_surfels(points[:500], normals[:500]).estimated
+    assert not zo.point_surfels(points[:500], normals[:500], oriented=True).estimated
+    assert zo.point_surfels(points[:1]).estimated
+
+
+def test_estimated_normals_are_never_oriented_ones():
+    from zbuf_occlude.visibility.point_splats import PointSurfels
+
+    points, ones = np.zeros((2, 3)), np.ones(2)
+    with pytest.raises(InvalidInputError, match="oriented and estimated"):
+        PointSurfels(points, points, ones, ones, True, estimated=True)
+    with pytest.raises(ArgumentTypeError, match="estimated must be True or False"):
+        PointSurfels(points, points, ones, ones, False, estimated="yes")

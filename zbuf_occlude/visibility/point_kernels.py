@@ -18,7 +18,10 @@ from collections.abc import Iterator
 import numba
 import numpy as np
 
-__all__ = ["camera_frame", "decide", "decide_threaded", "splat_surfels", "splat_surfels_threaded", "threads_for", "threads_started"]
+__all__ = [
+    "camera_frame", "decide", "decide_threaded", "splat_surfels", "splat_surfels_threaded", "threads_for", "threads_started",
+    "NORMALS_GIVEN", "NORMALS_ORIENTED", "NORMALS_ESTIMATED",
+]  # fmt: skip
 
 #: A surfel seen closer than this to edge-on (|cos| between its normal and a pixel's ray) covers
 #: nothing there: its footprint is a line of zero area (and the ray-plane depth is unbounded).
@@ -40,6 +43,18 @@ CURVATURE_SLACK = 1.0
 #: 0.35 gave +0.4 and +0.6); it costs 0.2-0.4 points with exact normals, where walls thinner
 #: than it show their far side (docs/results/point_visibility.md).
 DEPTH_SLACK = 0.25
+
+#: How the normals of :func:`decide` were found (its ``normals`` argument): given, of either sign.
+NORMALS_GIVEN = 0
+#: Given, and pointing out of a closed surface consistently (``oriented``).
+NORMALS_ORIENTED = 1
+#: Estimated from the points.  A winner's disk is then tilted by its normal's error (a disk of
+#: radius r tilted by θ reaches r·sin θ toward the camera: 0.26 spacings at 15°), so a winner
+#: whose *centre* lies less than :data:`DEPTH_SLACK` spacings in front of the point is on the
+#: point's own sheet too, wherever its disk meets the pixel's ray.  Chosen on the tuning meshes
+#: (+0.002 at 2,048 and 10,000 points; with given normals, whose disks are exact, it cost 0.001
+#: to 0.003, so they keep the disk's depth alone; docs/results/point_visibility.md).
+NORMALS_ESTIMATED = 2
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -248,7 +263,7 @@ def _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, to
 
 
 @numba.njit(cache=True, nogil=True)
-def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented, sided):  # pragma: no cover - numba
+def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, normals, sided):  # pragma: no cover - numba
     """Per point: does the surfel that wins its pixel lie on the point's own surface?
 
     Point ``p`` is a candidate when nothing covers its pixel, when its own surfel wins, when the
@@ -256,8 +271,9 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     only cuts that plane, as past a convex crease), or when the winner's surface point ``h``
     (where the pixel's ray meets its disk) lies within ``tolerance · spacing[p]`` of ``p``'s
     tangent plane, widened by :func:`_curvature_allowance`, or less than :data:`DEPTH_SLACK`
-    spacings in front of ``p`` along the camera's axis.  A candidate is visible unless it
-    is seen through a gap of a surface in front (:func:`_in_a_gap`).  With ``oriented``
+    spacings in front of ``p`` along the camera's axis (with estimated normals, the nearer of
+    ``h`` and ``q``'s centre: :data:`NORMALS_ESTIMATED`).  A candidate is visible unless it
+    is seen through a gap of a surface in front (:func:`_in_a_gap`).  With oriented
     normals, a point facing away from the camera whose pixel a surfel facing it wins is hidden
     (the back of a closed surface).  A ``sided`` point facing away from the camera is hidden: it
     lies on the far side of a wall whose near side holds points too.  With exact normals of a convex shape, every point facing
@@ -275,8 +291,9 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
         Distance to the tangent plane, in spacings.
     crease_cos : float
         Normals closer than this (|cos|) are one smooth sheet.
-    oriented : bool
-        The normals point out of the surface consistently.
+    normals : int
+        How the normals were found: :data:`NORMALS_GIVEN`, :data:`NORMALS_ORIENTED` (they point
+        out of the surface consistently) or :data:`NORMALS_ESTIMATED`.
     sided : (N,) bool
         The point lies on one side of a thin wall, its normal pointing out of the wall
         (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`).
@@ -289,15 +306,16 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in range(cam.shape[0]):
-        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided)
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, normals, sided)
     return visible
 
 
 @numba.njit(cache=True, nogil=True)
 def _decide_point(
-    p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided
+    p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, normals, sided
 ):  # pragma: no cover - numba
     """:func:`decide` for point ``p``."""
+    oriented = normals == NORMALS_ORIENTED
     height, width = depth.shape
     px, py, pz = cam[p, 0], cam[p, 1], cam[p, 2]
     if pz <= 0.0:
@@ -330,18 +348,20 @@ def _decide_point(
     t = depth[j, i]
     dist = abs((x * t - px) * normal[p, 0] + (y * t - py) * normal[p, 1] + (t - pz) * normal[p, 2])
     allowance = tolerance * spacing[p] + _curvature_allowance(p, q, cam, normal, radius, crease_cos, 1.0)
-    if dist <= allowance or pz - t <= DEPTH_SLACK * spacing[p]:
+    # the winner's depth: where its disk meets the pixel's ray, or with estimated normals also its centre's
+    front = pz - (max(t, cam[q, 2]) if normals == NORMALS_ESTIMATED else t)
+    if dist <= allowance or front <= DEPTH_SLACK * spacing[p]:
         return not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
     return False
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def decide_threaded(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, oriented, sided):  # pragma: no cover - numba
+def decide_threaded(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos, normals, sided):  # pragma: no cover - numba
     """:func:`decide` on numba's threads (the same answer: each point is decided alone)."""
     pix, x0, y0 = box
     visible = np.zeros(cam.shape[0], dtype=np.bool_)
     for p in numba.prange(cam.shape[0]):
-        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented, sided)
+        visible[p] = _decide_point(p, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, normals, sided)
     return visible
 
 

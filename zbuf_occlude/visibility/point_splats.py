@@ -17,7 +17,10 @@ normals, where given), with the z-buffer test the mesh methods use:
 3. **The test.**  A point is visible when the surface point that wins its pixel lies on the
    point's own sheet: within a tolerance of its tangent plane, measured along the normal, so
    that grazing views do not magnify it, plus the curvature between the two when they are
-   neighbours on one smooth sheet; a winner whose centre lies behind that plane (past a convex
+   neighbours on one smooth sheet, or less than a quarter spacing in front of the point along
+   the camera's axis (:data:`~zbuf_occlude.visibility.point_kernels.DEPTH_SLACK`; where the
+   normals were estimated, the winner's centre counts too, since an estimated normal tilts the
+   winner's disk toward the camera); a winner whose centre lies behind that plane (past a convex
    crease) does not hide the point, and a point seen through a gap of a surface in front is
    hidden (:func:`~zbuf_occlude.visibility.point_kernels.decide`).
 4. **Thin walls.**  Where a wall is thinner than the sampling (a sign's plate, a car's sheet
@@ -155,6 +158,11 @@ class PointSurfels:
         of the wall (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`); found
         unless ``oriented``.  Facing away from a camera, such a point is hidden by the wall's
         near side.  All False where not given.
+    estimated : bool
+        The normals were estimated from the points (:func:`point_surfels` without normals): a
+        winner's disk may be tilted by its normal's error, and a view takes the winner's centre
+        as its depth too (:data:`~zbuf_occlude.visibility.point_kernels.NORMALS_ESTIMATED`).
+        Not with ``oriented``.  Default False.
     """
 
     points: NDArray[np.float64]
@@ -167,8 +175,14 @@ class PointSurfels:
     #: in which each view is splatted and decided: neighbours in space are neighbours in memory
     #: (about 2x faster at 100,000 points than the order given).
     order: NDArray[np.int64] = field(default=None, repr=False)  # type: ignore[assignment]
+    estimated: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("oriented", "estimated"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ArgumentTypeError(f"{name} must be True or False, got {described(getattr(self, name))}")
+        if self.oriented and self.estimated:
+            raise InvalidInputError("oriented and estimated exclude each other: estimated normals have no consistent sign")
         if self.sided is None:
             object.__setattr__(self, "sided", np.zeros(len(self.points), dtype=np.bool_))
         elif np.shape(self.sided) != (len(self.points),):
@@ -180,6 +194,15 @@ class PointSurfels:
 
             order = morton_order(self.points) if len(self.points) else np.zeros(0, dtype=np.int64)
             object.__setattr__(self, "order", order)
+
+    @property
+    def _normals(self) -> int:
+        """How the normals were found, as :func:`~zbuf_occlude.visibility.point_kernels.decide` takes it."""
+        from zbuf_occlude.visibility import point_kernels as kernels
+
+        if self.estimated:
+            return kernels.NORMALS_ESTIMATED
+        return kernels.NORMALS_ORIENTED if self.oriented else kernels.NORMALS_GIVEN
 
     @functools.cached_property
     def _in_order(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
@@ -245,7 +268,7 @@ class PointSurfels:
             else:
                 depth, ids = splat_surfels(cam, normal, radius, *box, image.width, image.height)
             decide = kernels.decide_threaded if threads > 1 else kernels.decide
-            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self.oriented, sided)
+            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self._normals, sided)
         visible = np.empty_like(decided)
         visible[order] = decided
         return visible & in_frustum
@@ -424,15 +447,16 @@ def point_surfels(
         f"preparing the splats of {n:,} points",
         hint="give fewer points" + ("" if nrm is not None else ", or normals (their estimate takes most of it)"),
     )
+    estimated = nrm is None
     if n < 2:
         spacing = np.zeros(n)
         if nrm is None:
             nrm = np.tile([0.0, 0.0, 1.0], (n, 1))
-        return PointSurfels(pts, nrm, spacing, spacing.copy(), bool(oriented))
+        return PointSurfels(pts, nrm, spacing, spacing.copy(), bool(oriented), estimated=estimated)
     from zbuf_occlude.visibility.point_preparation import surfel_geometry
 
     spacing, nrm, sided, order = surfel_geometry(pts, k, nrm, sides=not oriented)  # oriented: the caller's sides stand
-    return PointSurfels(pts, nrm, spacing, scale * spacing, bool(oriented), sided=sided, order=order)
+    return PointSurfels(pts, nrm, spacing, scale * spacing, bool(oriented), sided=sided, order=order, estimated=estimated)
 
 
 def visible_mask_points(
