@@ -150,7 +150,7 @@ def _tilted_winner(normals):
 
 
 def test_with_estimated_normals_a_winner_whose_centre_is_within_the_depth_slack_is_the_points_own_sheet():
-    # an estimated normal off by 30° tilts its disk 0.55 spacings toward the camera; its centre stands 0.2 in front
+    # an estimated normal off by 30° tilts its disk about 0.5 spacings toward the camera; its centre stands 0.2 in front
     assert _tilted_winner(kernels.NORMALS_ESTIMATED)[0]
     # given normals are exact: the disk is the surface, and it hides the point
     assert not _tilted_winner(kernels.NORMALS_GIVEN)[0]

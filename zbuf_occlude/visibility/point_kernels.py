@@ -271,8 +271,8 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     only cuts that plane, as past a convex crease), or when the winner's surface point ``h``
     (where the pixel's ray meets its disk) lies within ``tolerance · spacing[p]`` of ``p``'s
     tangent plane, widened by :func:`_curvature_allowance`, or less than :data:`DEPTH_SLACK`
-    spacings in front of ``p`` along the camera's axis (with estimated normals, the nearer of
-    ``h`` and ``q``'s centre: :data:`NORMALS_ESTIMATED`).  A candidate is visible unless it
+    spacings in front of ``p`` along the camera's axis (with estimated normals, ``h`` or ``q``'s
+    centre, whichever stands less far in front: :data:`NORMALS_ESTIMATED`).  A candidate is visible unless it
     is seen through a gap of a surface in front (:func:`_in_a_gap`).  With oriented
     normals, a point facing away from the camera whose pixel a surfel facing it wins is hidden
     (the back of a closed surface).  A ``sided`` point facing away from the camera is hidden: it
