@@ -220,6 +220,28 @@ def test_shape_stats_of_a_shaft_and_a_squat_top() -> None:
     turned = box @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]])
     assert shape_stats(turned)["width_m"] == pytest.approx(shape_stats(box)["width_m"], rel=1e-9)
     assert shape_stats(box)["width_m"] == pytest.approx(4.0, abs=0.1)
+    # the plan elongation: a 4 x 1 m footprint spreads four times as far along as across; a round one as far
+    assert shape_stats(box)["plan_elongation"] == pytest.approx(4.0, rel=0.1)
+    assert shape_stats(_shaft(rng))["plan_elongation"] < 1.4
+    line = np.column_stack([np.linspace(0, 3, 20), np.zeros(20), np.linspace(0, 1, 20)])
+    assert math.isnan(shape_stats(line)["plan_elongation"])  # a line has no breadth
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    angle=st.floats(0.0, 2 * np.pi),
+    scale=st.floats(0.01, 100.0),
+    shift=st.tuples(*[st.floats(-1e3, 1e3)] * 3),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_plan_elongation_is_of_the_footprint_s_proportions_alone(angle: float, scale: float, shift: tuple, seed: int) -> None:
+    """Turning a crop about z, scaling it or moving it leaves its plan elongation as it was (a heading-free statistic)."""
+    from zbuf_occlude.experiments.realism import shape_stats
+
+    crop = np.random.default_rng(seed).uniform([-2.0, -0.5, 0.0], [2.0, 0.5, 1.5], (100, 3))
+    c, s_ = np.cos(angle), np.sin(angle)
+    moved = scale * crop @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]]) + shift
+    assert shape_stats(moved)["plan_elongation"] == pytest.approx(shape_stats(crop)["plan_elongation"], rel=1e-6)
 
 
 def test_compare_classes_reveals_tall_shafts_against_squat_tops() -> None:

@@ -139,6 +139,30 @@ def test_a_shrub_is_as_tall_as_drawn_and_about_as_wide(seed: int) -> None:
 
 @FEW
 @given(seed=SEEDS)
+def test_a_hedge_fills_its_drawn_envelope_and_no_more(seed: int) -> None:
+    _, pieces, p, mesh = drawn("hedge", seed)
+    v, r = used(mesh), p["cluster_m"]
+    reach = 0.5 * np.array([p["length_m"], p["thickness_m"]]) + 0.15 * r  # a centre stands a radius inside, a vertex 1.15 radii out
+    assert np.all(np.abs(v[:, :2]) <= reach + 1e-9)
+    assert v[:, 2].min() == pytest.approx(0.0, abs=1e-12) and v[:, 2].max() <= p["height_m"] + 0.3 * r + 1e-9
+    assert len(pieces["foliage"]) == p["clusters"] and p["length_m"] == pytest.approx(p["length_ratio"] * p["height_m"])
+
+
+def test_hedges_are_longer_than_shrubs_from_above() -> None:
+    """A hedge's footprint is longer than it is broad, a shrub's about round (the spread of the vertices along the
+    footprint's principal axis over that across it, median over 20 seeds)."""
+
+    def elongation(name: str, seed: int) -> float:
+        xy = used(drawn(name, seed)[3])[:, :2]
+        spread = np.linalg.eigvalsh(np.cov(xy.T))
+        return float(np.sqrt(spread[1] / spread[0]))
+
+    hedges, shrubs = (np.median([elongation(name, seed) for seed in range(20)]) for name in ("hedge", "shrub"))
+    assert hedges > 1.5 > shrubs
+
+
+@FEW
+@given(seed=SEEDS)
 def test_a_tree_has_its_drawn_height_and_crown(seed: int) -> None:
     _, pieces, p, mesh = drawn("tree", seed)
     extent = np.ptp(used(mesh), axis=0)

@@ -39,7 +39,7 @@ def add_families_parser(subparsers: Any) -> argparse.ArgumentParser:
     rows = "; ".join(f"{name} (class {f.class_name})" for name, f in FAMILIES.items())
     p = subparsers.add_parser(
         "families",
-        help="write procedural trunks, shrubs, trees, utility poles, street lights or sign posts as meshes",
+        help="write procedural trunks, shrubs, hedges, trees, utility poles, street lights, sign posts or pedestrians as meshes",
         description=(
             "Write --count seeded objects of one procedural family into --out/CLASS/FAMILY_K.ply (z up, metres, standing "
             "on z = 0) with CLASS/FAMILY.manifest.json listing each file's drawn parameters and the seed. The folder is "

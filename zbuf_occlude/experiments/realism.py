@@ -188,7 +188,7 @@ def class_table(table: dict[str, dict[str, dict]]) -> str:
     the count exponent and the median outline share after it."""
     by_range = any("n_points_by_range" in st for sets in table.values() for st in sets.values())
     head = ["class", "set", "crops", "median points", "median height, m", "median width, m", "median height / width",
-            "median normalised height", "% of points per tenth of the height, bottom to top"]  # fmt: skip
+            "median plan elongation", "median normalised height", "% of points per tenth of the height, bottom to top"]  # fmt: skip
     if by_range:
         head += [f"median points at {b} m (crops)" for b in _bin_names()] + ["count exponent", "median outline share"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -196,7 +196,7 @@ def class_table(table: dict[str, dict[str, dict]]) -> str:
         for name, st in sets.items():
             profile = " ".join(f"{100 * v:.0f}" for v in st["height_shares"])
             cells = [k, name, str(st["crops"]), *(_fmt(st[key]) for key in ("n_points", "height_m", "width_m", "height_to_width",
-                                                                           "median_normalised_height")), profile]  # fmt: skip
+                                                                           "plan_elongation", "median_normalised_height")), profile]  # fmt: skip
             if by_range:
                 cells += [f"{_fmt(m)} ({c})" for m, c in zip(st["n_points_by_range"], st["crops_by_range"])]
                 cells += [_fmt(st["count_exponent"]), _fmt(st["outline_share"])]

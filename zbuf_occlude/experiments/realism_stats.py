@@ -357,7 +357,9 @@ def shape_stats(points_m: NDArray[np.floating]) -> dict:
     -------
     dict
         ``n_points``; ``height_m`` and ``width_m`` (x–y extent along the footprint's principal
-        axis), metres; ``height_to_width`` (NaN for a width of 0); ``median_normalised_height``
+        axis), metres; ``height_to_width`` (NaN for a width of 0); ``plan_elongation``, the footprint's
+        spread along its principal axis over its spread across it (the square root of the ratio of the
+        x–y covariance's eigenvalues; 1 for a round footprint, NaN for a line); ``median_normalised_height``
         (NaN for a height of 0); ``height_shares``, ``(HEIGHT_BINS,) float64``, the share of the
         points in each tenth of the height, bottom to top (all in the bottom bin for a height of 0).
     """
@@ -365,15 +367,17 @@ def shape_stats(points_m: NDArray[np.floating]) -> dict:
     z = p[:, 2]
     height = float(np.ptp(z)) if len(p) else 0.0
     xy = p[:, :2] - p[:, :2].mean(axis=0) if len(p) else np.zeros((0, 2))
-    width = 0.0
+    width, elongation = 0.0, math.nan
     if len(p) > 1:
-        _, axes = np.linalg.eigh(xy.T @ xy)
+        spread, axes = np.linalg.eigh(xy.T @ xy)
         width = float(np.ptp(xy @ axes[:, -1]))  # along the largest principal axis
+        if spread[0] > 1e-12 * spread[1]:
+            elongation = math.sqrt(spread[1] / spread[0])
     u = (z - z.min()) / height if height > 0 else np.zeros(len(z))
     shares = np.bincount(np.minimum((u * HEIGHT_BINS).astype(np.int64), HEIGHT_BINS - 1), minlength=HEIGHT_BINS) / max(len(z), 1)
     return {
         "n_points": len(p), "height_m": height, "width_m": width,
-        "height_to_width": height / width if width > 0 else math.nan,
+        "height_to_width": height / width if width > 0 else math.nan, "plan_elongation": elongation,
         "median_normalised_height": float(np.median(u)) if height > 0 else math.nan,
         "height_shares": shares.astype(np.float64),
     }  # fmt: skip
@@ -407,8 +411,9 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
     Returns
     -------
     dict
-        ``crops``; the medians of ``n_points``, ``height_m``, ``width_m``, ``height_to_width`` and
-        ``median_normalised_height``; ``height_shares``, ``(HEIGHT_BINS,) float64``; with
+        ``crops``; the medians of ``n_points``, ``height_m``, ``width_m``, ``height_to_width``,
+        ``plan_elongation`` and ``median_normalised_height`` (NaN where no crop gives a finite one);
+        ``height_shares``, ``(HEIGHT_BINS,) float64``; with
         ``by_range`` also ``range_m`` (median distance to the centroid, metres),
         ``n_points_by_range`` and ``crops_by_range`` (:func:`range_bin_medians`, ``(B,)``),
         ``count_exponent`` (:func:`fit_count_exponent` over the crops; NaN for fewer than three
@@ -416,7 +421,7 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
     """
     stats = [shape_stats(c.points_m) for c in clouds]
     summary = {"crops": len(stats)}
-    for key in ("n_points", "height_m", "width_m", "height_to_width", "median_normalised_height"):
+    for key in ("n_points", "height_m", "width_m", "height_to_width", "plan_elongation", "median_normalised_height"):
         values = np.array([st[key] for st in stats], dtype=np.float64)
         summary[key] = float(np.nanmedian(values)) if np.isfinite(values).any() else math.nan
     summary["height_shares"] = np.mean([st["height_shares"] for st in stats], axis=0)

@@ -6,8 +6,8 @@ usage: python docs/results/families/set_shapes.py SET -- experiment sim2real ARG
 
 Builds seed 0's SET exactly as the run does (its sensor fit, families and placements; nothing is trained) and
 prints, per class, for the fit half's real clouds and for the set's clouds as the classifiers get them (256 points,
-normalised): how many clouds, their height / width as the families fit measures it (10th / 50th / 90th percentile;
-:func:`~zbuf_occlude.experiments.realism_stats.shape_stats`), the median number of distinct points among the 256 (a
+normalised): how many clouds, their height / width and plan elongation as the families fit measures them (10th /
+50th / 90th percentile; :func:`~zbuf_occlude.experiments.realism_stats.shape_stats`), the median number of distinct points among the 256 (a
 crop of fewer returns is padded with repeats), and the mean share of points per tenth of the height.  The scored
 half is never read.
 """
@@ -24,6 +24,9 @@ from zbuf_occlude.experiments.realism_stats import shape_stats
 from zbuf_occlude.experiments.sim2real import run as sim2real_run
 
 
+PERCENTILES = (10, 50, 90)
+
+
 def main() -> None:
     kind, argv = sys.argv[1], sys.argv[sys.argv.index("--") + 1 :]
     config = sim2real_config(build_parser().parse_args(argv))
@@ -34,11 +37,11 @@ def main() -> None:
     for k, name in enumerate(sets.names):
         for tag, (clouds, labels) in (("real, fit half", fit_half), (kind, (built.points, built.labels))):
             shapes = [shape_stats(c) for c in clouds[labels == k]]
-            ratio = [s["height_to_width"] for s in shapes]
+            ratio, plan = ([s[key] for s in shapes] for key in ("height_to_width", "plan_elongation"))
             distinct = np.median([len(np.unique(c, axis=0)) for c in clouds[labels == k]])
             shares = 100 * np.mean([s["height_shares"] for s in shapes], axis=0)
-            print(f"{name:10s} {tag:15s} {len(shapes):3d} clouds; height / width {np.nanpercentile(ratio, 10):.2f} / "
-                  f"{np.nanmedian(ratio):.2f} / {np.nanpercentile(ratio, 90):.2f}; distinct points {distinct:.0f}; "
+            print(f"{name:10s} {tag:15s} {len(shapes):3d} clouds; height / width {' / '.join(f'{v:.2f}' for v in np.nanpercentile(ratio, PERCENTILES))}; "
+                  f"plan elongation {' / '.join(f'{v:.2f}' for v in np.nanpercentile(plan, PERCENTILES))}; distinct points {distinct:.0f}; "
                   f"% per tenth {' '.join(f'{v:.0f}' for v in shares)}")  # fmt: skip
 
 

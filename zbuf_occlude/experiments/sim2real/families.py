@@ -12,14 +12,17 @@ drawn in ``[lo, hi]``) to the crops' height / width, in log space: starting from
 width goes as one over the stretch) and its half-width by a quarter of ``log(q90/q10)_real −
 log(q90/q10)_sim`` (not below 0), clipped to ``[MIN_WIDTH_SCALE, MAX_WIDTH_SCALE]``.  A family's
 distance to the real crops is the mean ``|log(q_sim / q_real)|`` over the 10th, 50th and 90th
-percentiles of height / width plus the profile distance
-(:func:`~zbuf_occlude.experiments.realism_stats.profile_distance`); of the ranges tried (the first
-and each update's) the nearest is kept, and the class takes the families within :data:`CHOICE_SLACK`
-of its nearest family, in equal shares.  Given the user's meshes of the class, scanned the same way,
-only the families nearer the real crops than those meshes are (a family that would move the class's
-crops away from the real ones adds nothing); a class whose meshes are nearer than every family keeps
-its meshes alone.  Every family tried is recorded with what it was fitted to and what it reached,
-and the meshes' statistics beside them (:attr:`FamiliesFit.record`).
+percentiles of height / width, plus the same of the footprint's plan elongation (``plan_elongation``:
+how much longer than broad the crop is from above, which the stretch does not change), plus the
+profile distance (:func:`~zbuf_occlude.experiments.realism_stats.profile_distance`); of the ranges
+tried (the first and each update's) the nearest is kept.  A class then takes its nearest family, and
+each next family, nearest first, whose crops brought into the chosen ones' bring their union nearer
+the real crops (a real class is often a mix: shrubs and hedges, trunks and utility poles), in equal
+shares.  Given the user's meshes of the class, scanned the same way, the chosen families must come
+nearer the real crops than those meshes (a family that would move the class's crops away from the
+real ones adds nothing); a class whose meshes are nearer keeps its meshes alone.  Every family tried
+is recorded with what it was fitted to and what it reached, and the meshes' statistics beside them
+(:attr:`FamiliesFit.record`).
 
 The objects, crops and their seeds derive from ``seed`` alone, so a fit is the same on every run.  A
 class that no family writes to (cars) is left to the user's meshes.
@@ -48,15 +51,13 @@ from zbuf_occlude.mesh.families.fitted import (
 from zbuf_occlude.mesh.families.registry import FAMILIES
 from zbuf_occlude.mesh.sizes import SizeRange
 
-__all__ = ["CHOICE_SLACK", "FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_heights", "family_meshes",
+__all__ = ["FIT_QUANTILES", "MIN_FIT_CROPS", "crop_shapes", "families_of", "family_heights", "family_meshes",
            "fit_families"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 #: The percentiles of the crops' height / width that the stretch is fitted to and scored on.
 FIT_QUANTILES = (10.0, 50.0, 90.0)
-#: A class takes every family whose distance is within this of the nearest family's.
-CHOICE_SLACK = 0.05
 #: Fewest real crops of a class, and fewest simulated crops of a family, a fit is made from.
 MIN_FIT_CROPS = 5
 #: Returns a simulated crop needs to count (the ``lidar`` set redraws crops with fewer).
@@ -110,16 +111,21 @@ def crop_shapes(clouds: Sequence[NDArray[np.floating]]) -> dict:
     Returns
     -------
     dict
-        ``crops`` (those with a height and a width), ``height_to_width`` (the :data:`FIT_QUANTILES`
-        percentiles of :func:`~zbuf_occlude.experiments.realism_stats.shape_stats`' height / width)
-        and ``height_shares`` (``(HEIGHT_BINS,)``, their mean share of points per tenth of the height).
+        ``crops`` (those with a height and a width), ``height_to_width`` and ``plan_elongation`` (the
+        :data:`FIT_QUANTILES` percentiles of :func:`~zbuf_occlude.experiments.realism_stats.shape_stats`'
+        height / width and plan elongation, the latter over the crops whose footprint is not a line; NaN
+        where every one is) and ``height_shares`` (``(HEIGHT_BINS,)``, their mean share of points per
+        tenth of the height).
     """
     stats = [shape_stats(np.asarray(c, np.float64)) for c in clouds if len(c) >= 2]
     stats = [s for s in stats if math.isfinite(s["height_to_width"]) and s["height_m"] > 0]
+    nan = [math.nan] * len(FIT_QUANTILES)
     if not stats:
-        return {"crops": 0, "height_to_width": [math.nan] * len(FIT_QUANTILES), "height_shares": [math.nan] * HEIGHT_BINS}
+        return {"crops": 0, "height_to_width": nan, "plan_elongation": nan, "height_shares": [math.nan] * HEIGHT_BINS}
     ratios = np.array([s["height_to_width"] for s in stats])
+    elongation = np.array([s["plan_elongation"] for s in stats])
     return {"crops": len(stats), "height_to_width": [float(v) for v in np.percentile(ratios, FIT_QUANTILES)],
+            "plan_elongation": [float(v) for v in np.nanpercentile(elongation, FIT_QUANTILES)] if np.isfinite(elongation).any() else nan,
             "height_shares": [float(v) for v in np.mean([s["height_shares"] for s in stats], axis=0)]}  # fmt: skip
 
 
@@ -127,12 +133,14 @@ def _distance(sim: dict, real: dict) -> float:
     if sim["crops"] < MIN_FIT_CROPS:
         return math.inf
     q = np.abs(np.log(np.asarray(sim["height_to_width"]) / np.asarray(real["height_to_width"])))
-    return float(q.mean()) + profile_distance(sim["height_shares"], real["height_shares"])
+    plan = np.abs(np.log(np.asarray(sim["plan_elongation"]) / np.asarray(real["plan_elongation"])))
+    return float(q.mean()) + float(plan.mean()) + profile_distance(sim["height_shares"], real["height_shares"])
 
 
-def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: int) -> dict:
-    """:func:`crop_shapes` of ``crops`` crops of each of ``entries`` (MeshEntry: normalised, z up), scanned as the
-    ``lidar`` set scans them (:data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size)."""
+def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: int) -> list[NDArray[np.float64]]:
+    """``crops`` crops of each of ``entries`` (MeshEntry: normalised, z up), scanned as the ``lidar`` set scans them
+    (:data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size): those of
+    ``_MIN_RETURNS`` returns or more, each's distinct points."""
     from zbuf_occlude.sensors.crops import lidar_object_samples
 
     placement, clouds = CropPlacement(), []
@@ -141,7 +149,7 @@ def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: in
         samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,
                                        distributions=dist, class_name=entry.class_name)  # fmt: skip
         clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= _MIN_RETURNS]
-    return crop_shapes(clouds)
+    return clouds
 
 
 def _json_distance(distance: float) -> float | None:
@@ -150,9 +158,9 @@ def _json_distance(distance: float) -> float | None:
 
 
 def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, float], *, objects: int, crops: int,
-               seed: int) -> dict:  # fmt: skip
-    """:func:`crop_shapes` of ``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``,
-    scanned as the ``lidar`` set scans (the same objects and placements for every ``width_scale``)."""
+               seed: int) -> list[NDArray[np.float64]]:  # fmt: skip
+    """``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``, scanned as the ``lidar``
+    set scans (:func:`_scanned`; the same objects and placements for every ``width_scale``)."""
     from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
     from zbuf_occlude.mesh.load import normalize_mesh
 
@@ -164,12 +172,14 @@ def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, f
 
 def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: int, crops: int, seed: int,
                 iterations: int) -> dict:  # fmt: skip
-    """The stretch of ``family`` fitted to ``real`` (:func:`crop_shapes`): the nearest of ``iterations + 1`` tried."""
+    """The stretch of ``family`` fitted to ``real`` (:func:`crop_shapes`): the nearest of ``iterations + 1`` tried,
+    with its crops (``"clouds"``)."""
     lo, hi = 1.0, 1.0
     steps = []
     for step in range(iterations + 1):
-        sim = _simulated(family, size, sensor, (lo, hi), objects=objects, crops=crops, seed=seed)
-        steps.append({"width_scale": [lo, hi], "simulated": sim, "distance": _distance(sim, real)})
+        clouds = _simulated(family, size, sensor, (lo, hi), objects=objects, crops=crops, seed=seed)
+        sim = crop_shapes(clouds)
+        steps.append({"width_scale": [lo, hi], "simulated": sim, "distance": _distance(sim, real), "clouds": clouds})
         if sim["crops"] < MIN_FIT_CROPS or step == iterations:
             break
         (s10, s50, s90), (r10, r50, r90) = sim["height_to_width"], real["height_to_width"]
@@ -180,6 +190,20 @@ def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: in
     best = min(steps, key=lambda st: st["distance"])
     return {**best, "steps": [{"width_scale": st["width_scale"], "height_to_width": st["simulated"]["height_to_width"],
                                "crops": st["simulated"]["crops"], "distance": st["distance"]} for st in steps]}  # fmt: skip
+
+
+def _choose(tried: Mapping[str, dict], real: dict) -> tuple[list[str], float]:
+    """The families a class takes (module docstring): the nearest, then each next, nearest first, whose crops
+    (``tried[name]["clouds"]``) brought into the chosen ones' bring the union nearer ``real``; and the union's distance."""
+    order = sorted((n for n, t in tried.items() if math.isfinite(t["distance"])), key=lambda n: tried[n]["distance"])
+    if not order:
+        return [], math.inf
+    chosen, pool, distance = [order[0]], list(tried[order[0]]["clouds"]), tried[order[0]]["distance"]
+    for name in order[1:]:
+        joined = _distance(crop_shapes(pool + tried[name]["clouds"]), real)
+        if joined < distance:
+            chosen, pool, distance = [*chosen, name], pool + tried[name]["clouds"], joined
+    return chosen, distance
 
 
 def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, sizes: Mapping[str, SizeRange], *, objects: int = 8,
@@ -203,9 +227,9 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
     fitted_on : str
         What the crops are, for the record (``"the fit half: 343 scans"``).
     meshes : mapping of str to sequence of MeshEntry, optional
-        The user's meshes per class (normalised, z up), scanned as the families are: a class takes only
-        the families nearer its real crops than its meshes are, and none where its meshes are nearer
-        than every family.  A class without meshes here takes its nearest families.
+        The user's meshes per class (normalised, z up), scanned as the families are: a class takes its
+        chosen families only where their crops together come nearer its real crops than its meshes' do,
+        and none otherwise.  A class without meshes here takes its chosen families.
 
     Returns
     -------
@@ -225,8 +249,9 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise InvalidInputError(f"fit_families: {key} must be an integer >= 1, got {value!r}")
     doc: dict = {"format": FAMILIES_FIT_FORMAT, "fitted_on": fitted_on, "sensor": getattr(sensor, "name", ""),
-                 "statistic": "crops' height / width (10th, 50th, 90th percentile) and share of points per tenth of the height",
-                 "seed": int(seed), "objects": objects, "crops": crops, "iterations": iterations, "choice_slack": CHOICE_SLACK,
+                 "statistic": "crops' height / width and plan elongation (10th, 50th, 90th percentile) and share of points per tenth of the height",
+                 "choice": "the nearest family, then each next one that brings the union of the chosen families' crops nearer",
+                 "seed": int(seed), "objects": objects, "crops": crops, "iterations": iterations,
                  "classes": {}, "meshes_kept": {}}  # fmt: skip
     for cls in sorted(real):
         names = families_of(cls)
@@ -237,15 +262,17 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         for name in names:
             log.info("fitting the %s family to %d %s crops", name, target["crops"], cls)
             tried[name] = _fit_family(name, target, sizes[cls], sensor, objects=objects, crops=crops, seed=seed, iterations=iterations)
-        best = min(t["distance"] for t in tried.values())
-        if not math.isfinite(best):
+        chosen, joined = _choose(tried, target)
+        if not chosen:
             continue
-        own = _scanned(meshes[cls], sizes[cls], sensor, crops=crops, seed=seed) if meshes and meshes.get(cls) else None
+        own = crop_shapes(_scanned(meshes[cls], sizes[cls], sensor, crops=crops, seed=seed)) if meshes and meshes.get(cls) else None
         own_distance = _distance(own, target) if own is not None else math.inf
-        chosen = [n for n, t in tried.items() if t["distance"] <= best + CHOICE_SLACK and t["distance"] < own_distance]
+        if joined >= own_distance:
+            chosen = []
         for t in tried.values():
             t["distance"] = _json_distance(t["distance"])
-        entry = {"real": target, "tried": tried}
+            del t["clouds"]
+        entry = {"real": target, "tried": tried, "chosen_distance": _json_distance(joined)}
         if own is not None:
             entry["meshes"] = {**own, "objects": len(meshes[cls]), "distance": _json_distance(own_distance)}
         if not chosen:

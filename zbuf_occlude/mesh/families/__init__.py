@@ -1,6 +1,6 @@
 """Procedural object families: seeded, parameterised generators of the outdoor objects real scans hold.
 
-Bare trunks, shrubs, trees with a crown of leaf clusters, utility poles (crossarms, insulators,
+Bare trunks, shrubs, clipped hedges, trees with a crown of leaf clusters, utility poles (crossarms, insulators,
 short wire spans), street lights (arms, heads), sign posts (several plates per post) and
 pedestrians (standing or walking, coats and bags), each
 composed of ``trimesh.creation`` parts in real size (metres, z up, standing on z = 0), each

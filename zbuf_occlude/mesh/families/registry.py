@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.families import pedestrian, shrub, sign_post, street_light, tree, trunk, utility_pole
+from zbuf_occlude.mesh.families import hedge, pedestrian, shrub, sign_post, street_light, tree, trunk, utility_pole
 from zbuf_occlude.mesh.families.parts import assemble
 
 __all__ = ["FAMILIES", "Family", "family_rng", "get_family"]
@@ -64,7 +64,7 @@ class Family:
         return assemble(pieces), params
 
 
-_MODULES = (trunk, shrub, tree, utility_pole, street_light, sign_post, pedestrian)
+_MODULES = (trunk, shrub, hedge, tree, utility_pole, street_light, sign_post, pedestrian)
 #: Every family, by name.
 FAMILIES: dict[str, Family] = {m.NAME: Family.of(m) for m in _MODULES}
 
