@@ -20,12 +20,12 @@
 set -euo pipefail
 data=$1; out=$2; keep=${3:-}
 count=${COUNT:-12}
-families=${FAMILIES:-trunk utility_pole street_light sign_post shrub}
+families=${FAMILIES:-trunk utility_pole street_light sign_post shrub hedge}
 fit=${FIT:-}; sizing=${SIZING:-own}
 mkdir -p "$out"; : > "$out/left_out.txt"
 declare -A REAL=([pole]=Trunk [bush]=Bush [pedestrian]=Pedestrian)
 declare -A SIZE=([pole]=3:9 [bush]=0.4:2.5 [pedestrian]=1.5:1.95)  # the preset recipe's (sim2real's CLASS_SIZES_M)
-declare -A CLASS=([trunk]=pole [utility_pole]=pole [street_light]=pole [sign_post]=pole [shrub]=bush [tree]=tree
+declare -A CLASS=([trunk]=pole [utility_pole]=pole [street_light]=pole [sign_post]=pole [shrub]=bush [hedge]=bush [tree]=tree
                   [pedestrian]=pedestrian)
 scan() {  # scan SET CLASS I MESH UP SIZE SIZE_OF: four crops of one mesh, the preset recipe's placements
   local rc=0

@@ -25,7 +25,7 @@ from zbuf_occlude.sensors.scene.objects import GROUND_ID  # noqa: E402
 out, keep = Path(sys.argv[1]), Path(sys.argv[2])
 SETS = {
     "pole": ["street", "trunk", "utility_pole", "street_light", "sign_post"],
-    "bush": ["street", "shrub"],
+    "bush": ["street", "shrub", "hedge"],
     "pedestrian": ["street", "pedestrian"],
 }
 BINS = ["5-10", "10-15", "15-20", "20-25"]
