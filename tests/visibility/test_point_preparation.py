@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
@@ -85,6 +85,7 @@ matrices = st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=3 * 14, max_
 
 @settings(max_examples=60, deadline=None)
 @given(values=matrices, squash=st.sampled_from([1.0, 1e-3, 1e-9, 0.0]), scale=st.sampled_from([1e-80, 1.0, 1e80]))
+@example(values=[0.0] * 39 + [1.0] * 3, squash=1.0, scale=1e80)  # a line (rank 1) whose products of entries overflow
 def test_the_plane_fits_agree_with_lapack(values, squash, scale):
     # 14 points, flattened along z by ``squash`` (0: exactly planar), at any scale
     points = np.asarray(values).reshape(14, 3) * [1.0, 1.0, squash] * scale

@@ -23,6 +23,8 @@ neighbourhoods and candidates; here about 60 % is the neighbour search, 20 % the
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -102,8 +104,16 @@ def _rotate(a, v, p, q):  # pragma: no cover - numba
 @numba.njit(cache=True, nogil=True)
 def _jacobi_smallest(a, v, out):  # pragma: no cover - numba
     """Writes into ``out`` the unit eigenvector of the smallest eigenvalue of the symmetric 3 x 3
-    ``a`` (overwritten: its eigenvalues end on the diagonal) by cyclic Jacobi rotations; returns
-    that eigenvalue's share of the trace (0 when the trace is not positive)."""
+    ``a`` (overwritten: scaled by the power of two that brings its largest entry into [0.5, 1), which
+    is exact and keeps every product of two entries from overflowing or underflowing, then its
+    eigenvalues end on the diagonal) by cyclic Jacobi rotations; returns that eigenvalue's share of
+    the trace (0 when the trace is not positive)."""
+    big = max(abs(a[0, 0]), abs(a[1, 1]), abs(a[2, 2]), abs(a[0, 1]), abs(a[0, 2]), abs(a[1, 2]))
+    if big > 0.0:
+        factor = math.ldexp(1.0, -math.frexp(big)[1])
+        for m in range(3):
+            for j in range(3):
+                a[m, j] *= factor
     for m in range(3):
         for j in range(3):
             v[m, j] = 1.0 if m == j else 0.0
