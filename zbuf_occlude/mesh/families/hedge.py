@@ -68,7 +68,7 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
         centres[k, axis] = side * half[axis]
     centres[:, 2] += 0.5 * size[2]
     clusters = [leaf_cluster(rng, c, r) for c in centres]
-    bottom = min(float(m.vertices[:, 2].min()) for m in clusters)  # the lowest leaf stands on the ground
+    bottom = min(float(m.bounds[0, 2]) for m in clusters)  # the lowest leaf (of a face kept) stands on the ground
     for m in clusters:
         m.apply_translation([0.0, 0.0, -bottom])
     return {"foliage": clusters}, {
