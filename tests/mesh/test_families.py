@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.cli.main import main
@@ -82,11 +82,12 @@ def test_every_drawn_parameter_lies_in_its_cited_range(name: str, seed: int) -> 
 @pytest.mark.parametrize("name", NAMES)
 @FEW
 @given(seed=SEEDS)
+@example(seed=673)  # a pedestrian whose lowest vertex stands 2.3e-9 m above z = 0 after its parts' translations
 def test_the_object_stands_on_the_ground_z_up_in_metres(name: str, seed: int) -> None:
     _, _, params, mesh = drawn(name, seed)
     v = used(mesh)
     assert np.isfinite(v).all()
-    assert abs(v[:, 2].min()) < 1e-9  # standing on z = 0
+    assert abs(v[:, 2].min()) < 1e-6  # standing on z = 0, within a micrometre (the parts' translations round)
     extent = v.max(axis=0) - v.min(axis=0)
     assert extent[2] >= 0.9 * min(extent[:2].max(), params.get("height_m", extent[2]))  # a standing object is not lying down
     assert 0.3 < extent[2] < 25.0  # metres: from a low shrub to a tall tree
