@@ -101,6 +101,12 @@ def _rotate(a, v, p, q):  # pragma: no cover - numba
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _largest_entry(a):  # pragma: no cover - numba
+    """The largest magnitude among the symmetric 3 x 3 ``a``'s six distinct entries."""
+    return max(abs(a[0, 0]), abs(a[1, 1]), abs(a[2, 2]), abs(a[0, 1]), abs(a[0, 2]), abs(a[1, 2]))
+
+
 @numba.njit(cache=True, nogil=True)
 def _jacobi_smallest(a, v, out):  # pragma: no cover - numba
     """Writes into ``out`` the unit eigenvector of the smallest eigenvalue of the symmetric 3 x 3
@@ -108,7 +114,7 @@ def _jacobi_smallest(a, v, out):  # pragma: no cover - numba
     is exact and keeps every product of two entries from overflowing or underflowing, then its
     eigenvalues end on the diagonal) by cyclic Jacobi rotations; returns that eigenvalue's share of
     the trace (0 when the trace is not positive)."""
-    big = max(abs(a[0, 0]), abs(a[1, 1]), abs(a[2, 2]), abs(a[0, 1]), abs(a[0, 2]), abs(a[1, 2]))
+    big = _largest_entry(a)
     if big > 0.0:
         factor = math.ldexp(1.0, -math.frexp(big)[1])
         for m in range(3):
@@ -139,7 +145,7 @@ def _smallest_eigenvector(a, v, out):  # pragma: no cover - numba
     eigenvalues from the cubic's trigonometric solution (Smith 1961), the eigenvector as the
     largest cross product of two rows of ``a - λ0 I``; closer than :data:`_CLOSED_FORM_GAP` of
     the spread to the middle one (the vector is ill-conditioned there), Jacobi's rotations."""
-    big = max(abs(a[0, 0]), abs(a[1, 1]), abs(a[2, 2]), abs(a[0, 1]), abs(a[0, 2]), abs(a[1, 2]))
+    big = _largest_entry(a)
     if big == 0.0:  # all points at one place: LAPACK's answer for the zero matrix
         out[0], out[1], out[2] = 1.0, 0.0, 0.0
         return 0.0

@@ -200,9 +200,10 @@ def _choose(tried: Mapping[str, dict], real: dict) -> tuple[list[str], float]:
         return [], math.inf
     chosen, pool, distance = [order[0]], list(tried[order[0]]["clouds"]), tried[order[0]]["distance"]
     for name in order[1:]:
-        joined = _distance(crop_shapes(pool + tried[name]["clouds"]), real)
+        candidate = pool + tried[name]["clouds"]
+        joined = _distance(crop_shapes(candidate), real)
         if joined < distance:
-            chosen, pool, distance = [*chosen, name], pool + tried[name]["clouds"], joined
+            chosen, pool, distance = [*chosen, name], candidate, joined
     return chosen, distance
 
 
