@@ -1,17 +1,25 @@
-"""An airborne preset out of the box: every echo it keeps reads at least its receiver's floor (12 counts, the IGN RIEGL
-receiver's weakest echo), one surface's intensities spread as a real receiver's do, and an optic given alone leaves the other to the material table."""
+"""An airborne preset out of the box: every echo it keeps reads at least its receiver's floor (23 counts, the IGN RIEGL
+receiver's as fit-sensor measures it), one surface's intensities spread as a real receiver's do, an optic given alone
+leaves the other to the material table, and vegetation returns as in the IGN tile."""
 
 from __future__ import annotations
 
 import io
+import os
+from pathlib import Path
 
 import laspy
 import numpy as np
 import pytest
 
 import zbuf_occlude as zo
+from zbuf_occlude.experiments.returns import IGN_ALTITUDE_M, PLOT_TREES, plot_scene
+from zbuf_occlude.io.las import read_las
+from zbuf_occlude.mesh.load import load_mesh
 from zbuf_occlude.sensors import AirborneScanner, airborne_preset, scan_airborne
+from zbuf_occlude.sensors.fit.return_model import fit_return_model
 from zbuf_occlude.sensors.kinds import with_beam
+from zbuf_occlude.sensors.patterns.airborne_presets import AIRBORNE_PRESETS
 
 
 def _las(scene, scanner, **optics) -> laspy.LasData:
@@ -29,9 +37,9 @@ def plot():
 def test_no_kept_echo_reads_zero_and_the_ground_spreads_as_a_receivers_do(plot, name: str) -> None:
     las = _las(plot, airborne_preset(name))
     intensity = np.asarray(las.intensity, np.float64)
-    assert len(las) > 400 and intensity.min() >= 12  # the detection floor: the IGN receiver's weakest echo, 12 counts
+    assert len(las) > 400 and intensity.min() >= 23  # the detection floor: the IGN receiver's, 23 counts
     beam = airborne_preset(name).beam
-    assert beam.detection_threshold * beam.intensity_scale == pytest.approx(12.0)
+    assert beam.detection_threshold * beam.intensity_scale == pytest.approx(23.0)
     ground = intensity[(np.asarray(las.classification) == 2) & (np.asarray(las.number_of_returns) == 1)]
     p5, p95 = np.percentile(ground, [5, 95])
     assert 1.85 <= p95 / p5 <= 5.55  # the IGN sample's single ground returns: 87 / 326, 3.7, ± 50 %
@@ -52,13 +60,59 @@ def test_a_transmittance_given_alone_keeps_the_materials_reflectances(plot) -> N
 
 
 def test_echoes_weaker_than_the_receivers_floor_are_not_recorded(plot) -> None:
-    """A dark ground (ρ 0.012: its returns about the floor) loses the echoes the floor cuts, and only those: the same
-    scan detecting from one count keeps them, below 12 counts, and the same echoes above."""
+    """A dark ground (ρ 0.023: its returns about the floor) loses the echoes the floor cuts, and only those: the same
+    scan detecting from one count keeps them, below 23 counts, and the same echoes above."""
     preset = airborne_preset("riegl-q1560")
     one_count = with_beam(preset, detection_threshold=1.0 / preset.beam.intensity_scale)
-    dark = {"reflectivity": [0.012, 0.3]}
+    dark = {"reflectivity": [0.023, 0.3]}
     floor, low = (np.asarray(_las(plot, s, **dark).intensity, np.float64) for s in (preset, one_count))
-    assert floor.min() >= 12 and (low < 12).sum() > 500  # the floor drops them
-    # and nothing else: the same echoes above it (an echo of 11.5 to 12 counts reads 12, but is below the floor)
-    assert np.array_equal(np.sort(low[low > 12]), np.sort(floor[floor > 12]))
-    assert (floor == 12).sum() < (low == 12).sum()
+    assert floor.min() >= 23 and (low < 23).sum() > 500  # the floor drops them
+    # and nothing else: the same echoes above it (an echo of 22.5 to 23 counts reads 23, but is below the floor)
+    assert np.array_equal(np.sort(low[low > 23]), np.sort(floor[floor > 23]))
+    assert (floor == 23).sum() < (low == 23).sum()
+
+
+SHARED = Path(os.environ.get("ZBUF_OCCLUDE_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+IGN_TILE = SHARED / "als_returns" / "ign_lidarhd_sample.laz"
+BUSHES = SHARED / "street_objects" / "bush"
+needs_ign = pytest.mark.skipif(not IGN_TILE.is_file(), reason="../shared/data/als_returns not present")
+
+
+@needs_ign
+def test_the_presets_receiver_is_the_ign_riegl_receiver_as_fit_sensor_measures_it() -> None:
+    """The RIEGL presets' range resolution and every airborne preset's floor and scale: fit-sensor's figures on the IGN
+    LiDAR HD sample (at its flying height of 1,500 m), within their spread over 20 resamples."""
+    fit = fit_return_model(read_las(IGN_TILE), altitude_m=IGN_ALTITUDE_M, bootstrap=20).estimates
+    for name in AIRBORNE_PRESETS:
+        beam = airborne_preset(name).beam
+        assert beam.detection_threshold * beam.intensity_scale == pytest.approx(fit["detection_threshold_counts"].value, abs=1.0)
+        assert beam.intensity_scale == pytest.approx(fit["intensity_scale"].value, rel=0.01)
+        if name.startswith(("riegl", "dales")):
+            assert beam.range_resolution_m == pytest.approx(fit["range_resolution_m"].value, abs=0.01)
+
+
+def _vegetation_figures(las: laspy.LasData) -> tuple[float, float, float]:
+    """High vegetation's (class 5) share of points from pulses of several returns, the median intensity of its
+    first-of-several returns over its single returns', and the single ground returns' p95 / p5."""
+    cls, n, r = np.asarray(las.classification), np.asarray(las.number_of_returns), np.asarray(las.return_number)
+    i = np.asarray(las.intensity, np.float64)
+    high = cls == 5
+    ratio = np.median(i[high & (n > 1) & (r == 1)]) / np.median(i[high & (n == 1)])
+    p5, p95 = np.percentile(i[(cls == 2) & (n == 1)], [5, 95])
+    return float((n[high] > 1).mean()), float(ratio), float(p95 / p5)
+
+
+@needs_ign
+@pytest.mark.skipif(not BUSHES.is_dir(), reason="../shared/data/street_objects not present")
+def test_the_riegl_preset_records_vegetation_as_the_ign_tile_does() -> None:
+    """Out of the box, over the plot of the shared vegetation meshes at their sizes: the multi-return share and the
+    first-of-several / single intensity ratio of high vegetation within ±20 % of the IGN tile's, the single ground
+    returns' p95 / p5 within ±50 %."""
+    meshes = [load_mesh(BUSHES / tree.file, up=tree.up) for tree in PLOT_TREES]
+    scene, _ = plot_scene(meshes, [tree.size_m for tree in PLOT_TREES], spacing_m=14.0)
+    s = scan_airborne(scene, airborne_preset("riegl-q1560"), (0.0, 0.0), 28.0, seed=0)
+    share, ratio, spread = _vegetation_figures(laspy.read(io.BytesIO(s.to_las_bytes())))
+    tile_share, tile_ratio, tile_spread = _vegetation_figures(laspy.read(IGN_TILE))
+    assert 0.8 <= share / tile_share <= 1.2, (share, tile_share)
+    assert 0.8 <= ratio / tile_ratio <= 1.2, (ratio, tile_ratio)
+    assert 0.5 <= spread / tile_spread <= 1.5, (spread, tile_spread)

@@ -35,29 +35,37 @@ __all__ = ["AIRBORNE_PRESETS", "airborne_preset"]
 # The presets' beams.  Divergences, pulse lengths, maximum returns and ranging accuracies: the
 # data sheets as HELIOS++ lists them (pyhelios/data/scanners_als.xml; Winiwarter et al. 2022,
 # "Virtual laser scanning with HELIOS++", Remote Sens. Environ. 269, 112772), 1/e² full angles.
-# Range resolution: half the pulse length, c·τ/2 (4 ns: 0.60 m), or the data sheet's vertical
-# discrimination where it gives one (ALS50-II: 3.5 m).  Sub-rays: 19 per pulse, the count at which
-# a tree's multi-return share settles within a few points (docs/results/returns.md).  Detection: the weakest echo the
-# RIEGL receiver of the IGN LiDAR HD sample records, 12 counts on the scale below (the file's least intensity; its
-# receiver keeps nothing weaker, so neither does the preset; fit-sensor's estimate of the same floor, from the
-# echoes' distribution, is 23 counts).  Power noise: σ = 0.3 of the natural log of each
+# Sub-rays: 19 per pulse, the count at which a tree's multi-return share settles within a few points
+# (docs/results/returns.md).
+# The receiver: what the RIEGL receiver of the IGN LiDAR HD sample (a RIEGL full-waveform scanner flown at ~1,500 m,
+# the only record of a RIEGL receiver here) records, as fit-sensor measures it on that file
+# (sensors/fit/return_model.py, 200 resamples over pulses), each figure rounded to its spread:
+# - range resolution 0.83 m (± 0.01): the lower end of the gaps between consecutive returns of a pulse (no gap of
+#   5,574 is under 0.82 m).  None of the RIEGL data sheets cited here gives a multi-target resolution; half the
+#   4 ns pulse, c·τ/2 = 0.60 m (what HELIOS++ models), is a bound this receiver does not reach.  The Leica keeps
+#   its data sheet's vertical discrimination (ALS50-II: 3.5 m); the Optech, of which no record is here, half its
+#   8 ns pulse (1.20 m);
+# - detection floor 23 counts (± 1): the lower end of the intensities of every return, on the scale below.  The
+#   file's least intensity, 12 counts, is one echo's: 3 of its 37,805 read under 16;
+# - intensity: 1.67e9 counts per unit of received energy (counts·m²), from its single ground returns, 16-bit
+#   (RIEGL: "16-bit intensity per echo").
+# For the Leica and Optech scanners the floor and the scale are the same figures, an ASSUMPTION.
+# Neither the range resolution nor the floor is measured on vegetation's share of multi-return pulses, which the
+# presets are compared with (docs/results/scanners.md).  Power noise: σ = 0.3 of the natural log of each
 # firing's received power, a spread of about 30 % in the intensity of one surface (speckle averaged over the receiver's
 # aperture, and the reflectance of natural ground varying from spot to spot): an ASSUMPTION, chosen before any
 # comparison and not fitted (the IGN sample's single ground returns, p95 / p5 = 3.7, would give 0.4 by the same
-# measure; docs/results/scanners/user_path.py).  Intensity: counts
-# per unit of received energy measured by fit-sensor on the IGN LiDAR HD sample (a RIEGL
-# full-waveform scanner flown at ~1,300 m), 1.67e9 counts·m², 16-bit (RIEGL: "16-bit intensity
-# per echo"); for the Leica and Optech scanners the same scale is an ASSUMPTION.
+# measure; docs/results/scanners/user_path.py).
 _SUBRAYS = 19
 _IGN_COUNTS = 1.67e9
-_IGN_FLOOR_COUNTS = 12.0
+_IGN_FLOOR_COUNTS = 23.0
+_IGN_RANGE_RESOLUTION_M = 0.83
 _POWER_NOISE = 0.3
-_FOUR_NS_M = 0.5 * 299_792_458.0 * 4e-9  # c·τ/2 of a 4 ns pulse: 0.5996 m
 
 
 def _airborne_beam(name: str, source: str, **fields) -> Beam:
-    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN intensity scale, the IGN
-    receiver's detection floor of 12 counts and a power noise of 0.3 (comment above)."""
+    """An airborne preset's beam: 1064 nm, 19 sub-rays, every echo resolved, the IGN receiver's intensity scale and
+    detection floor of 23 counts, and a power noise of 0.3 (comment above)."""
     fields = {"wavelength_nm": 1064.0, "footprint_rays": _SUBRAYS, "intensity_scale": _IGN_COUNTS,
               "detection_threshold": _IGN_FLOOR_COUNTS / _IGN_COUNTS, "power_noise": _POWER_NOISE, **fields}  # fmt: skip
     return Beam(name, source=source, **fields)
@@ -67,8 +75,8 @@ def _airborne_beam(name: str, source: str, **fields) -> Beam:
 # HELIOS++ lists the LMS-Q780: 0.25 mrad, 4 ns pulses, 20 mm accuracy, unlimited echoes per pulse,
 # full waveform, which LAS 1.4 caps at 15 return numbers).
 _Q1560_BEAM = _airborne_beam(
-    "riegl-q1560", "RIEGL LMS-Q1560 data sheet (2015): ≤ 0.25 mrad, 20 mm; LMS-Q780 in HELIOS++ scanners_als.xml: 4 ns pulse, unlimited echoes",
-    divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M, range_noise_m=0.02,
+    "riegl-q1560", "RIEGL LMS-Q1560 data sheet (2015): ≤ 0.25 mrad, 20 mm; LMS-Q780 in HELIOS++ scanners_als.xml: 4 ns pulse, unlimited echoes; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+    divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M, range_noise_m=0.02,
 )  # fmt: skip
 AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q1560": AirborneScanner(
@@ -88,8 +96,8 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q780": AirborneScanner(
         "riegl-q780", swath_deg=60.0, pulse_rate_hz=400_000.0, line_rate_hz=200.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL LMS-Q780 as HELIOS++ lists it (scanners_als.xml); altitude and speed assumed",
-        beam=_airborne_beam("riegl-q780", "HELIOS++ scanners_als.xml riegl_lms-q780: 0.25 mrad, 4 ns, 20 mm, unlimited echoes",
-                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M,
+        beam=_airborne_beam("riegl-q780", "HELIOS++ scanners_als.xml riegl_lms-q780: 0.25 mrad, 4 ns, 20 mm, unlimited echoes; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M,
                             range_noise_m=0.02),
     ),
     # RIEGL VQ-780i (scanners_als.xml lines 132-146): 0.25 mrad, 4 ns, 150-1000 kHz, 20-300 lines/s,
@@ -98,8 +106,8 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-vq780i": AirborneScanner(
         "riegl-vq780i", swath_deg=60.0, pulse_rate_hz=250_000.0, line_rate_hz=150.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL VQ-780i as HELIOS++ lists it (scanners_als.xml); altitude, speed and rates assumed",
-        beam=_airborne_beam("riegl-vq780i", "HELIOS++ scanners_als.xml riegl_vq_780i: 0.25 mrad, 4 ns, 20 mm, 15 echoes at 250 kHz",
-                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_FOUR_NS_M,
+        beam=_airborne_beam("riegl-vq780i", "HELIOS++ scanners_als.xml riegl_vq_780i: 0.25 mrad, 4 ns, 20 mm, 15 echoes at 250 kHz; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+                            divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M,
                             range_noise_m=0.02),
     ),
     # Leica ALS50-II (scanners_als.xml lines 24-35): 0.22 mrad, 10 ns, 20/60/150 kHz, oscillating
