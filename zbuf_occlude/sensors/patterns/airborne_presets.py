@@ -61,6 +61,7 @@ _IGN_COUNTS = 1.67e9
 _IGN_FLOOR_COUNTS = 23.0
 _IGN_RANGE_RESOLUTION_M = 0.83
 _POWER_NOISE = 0.3
+_IGN_RECEIVER = "; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts"  # a RIEGL preset's source ends with it
 
 
 def _airborne_beam(name: str, source: str, **fields) -> Beam:
@@ -75,7 +76,7 @@ def _airborne_beam(name: str, source: str, **fields) -> Beam:
 # HELIOS++ lists the LMS-Q780: 0.25 mrad, 4 ns pulses, 20 mm accuracy, unlimited echoes per pulse,
 # full waveform, which LAS 1.4 caps at 15 return numbers).
 _Q1560_BEAM = _airborne_beam(
-    "riegl-q1560", "RIEGL LMS-Q1560 data sheet (2015): ≤ 0.25 mrad, 20 mm; LMS-Q780 in HELIOS++ scanners_als.xml: 4 ns pulse, unlimited echoes; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+    "riegl-q1560", "RIEGL LMS-Q1560 data sheet (2015): ≤ 0.25 mrad, 20 mm; LMS-Q780 in HELIOS++ scanners_als.xml: 4 ns pulse, unlimited echoes" + _IGN_RECEIVER,
     divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M, range_noise_m=0.02,
 )  # fmt: skip
 AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
@@ -96,7 +97,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-q780": AirborneScanner(
         "riegl-q780", swath_deg=60.0, pulse_rate_hz=400_000.0, line_rate_hz=200.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL LMS-Q780 as HELIOS++ lists it (scanners_als.xml); altitude and speed assumed",
-        beam=_airborne_beam("riegl-q780", "HELIOS++ scanners_als.xml riegl_lms-q780: 0.25 mrad, 4 ns, 20 mm, unlimited echoes; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+        beam=_airborne_beam("riegl-q780", "HELIOS++ scanners_als.xml riegl_lms-q780: 0.25 mrad, 4 ns, 20 mm, unlimited echoes" + _IGN_RECEIVER,
                             divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M,
                             range_noise_m=0.02),
     ),
@@ -106,7 +107,7 @@ AIRBORNE_PRESETS: dict[str, AirborneScanner] = {
     "riegl-vq780i": AirborneScanner(
         "riegl-vq780i", swath_deg=60.0, pulse_rate_hz=250_000.0, line_rate_hz=150.0, altitude_m=1000.0, speed_mps=60.0,
         pattern="linear", source="RIEGL VQ-780i as HELIOS++ lists it (scanners_als.xml); altitude, speed and rates assumed",
-        beam=_airborne_beam("riegl-vq780i", "HELIOS++ scanners_als.xml riegl_vq_780i: 0.25 mrad, 4 ns, 20 mm, 15 echoes at 250 kHz; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts",
+        beam=_airborne_beam("riegl-vq780i", "HELIOS++ scanners_als.xml riegl_vq_780i: 0.25 mrad, 4 ns, 20 mm, 15 echoes at 250 kHz" + _IGN_RECEIVER,
                             divergence_deg=math.degrees(0.25e-3), max_returns=15, range_resolution_m=_IGN_RANGE_RESOLUTION_M,
                             range_noise_m=0.02),
     ),
