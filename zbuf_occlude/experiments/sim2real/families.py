@@ -117,8 +117,17 @@ def crop_shapes(clouds: Sequence[NDArray[np.floating]]) -> dict:
         where every one is) and ``height_shares`` (``(HEIGHT_BINS,)``, their mean share of points per
         tenth of the height).
     """
+    return _summary(_crop_stats(clouds))
+
+
+def _crop_stats(clouds: Sequence[NDArray[np.floating]]) -> list[dict]:
+    """:func:`~zbuf_occlude.experiments.realism_stats.shape_stats` of each crop that has a height and a width."""
     stats = [shape_stats(np.asarray(c, np.float64)) for c in clouds if len(c) >= 2]
-    stats = [s for s in stats if math.isfinite(s["height_to_width"]) and s["height_m"] > 0]
+    return [s for s in stats if math.isfinite(s["height_to_width"]) and s["height_m"] > 0]
+
+
+def _summary(stats: Sequence[dict]) -> dict:
+    """:func:`crop_shapes` of the crops whose :func:`_crop_stats` these are."""
     nan = [math.nan] * len(FIT_QUANTILES)
     if not stats:
         return {"crops": 0, "height_to_width": nan, "plan_elongation": nan, "height_shares": [math.nan] * HEIGHT_BINS}
@@ -171,15 +180,15 @@ def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, f
 
 
 def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: int, crops: int, seed: int,
-                iterations: int) -> dict:  # fmt: skip
-    """The stretch of ``family`` fitted to ``real`` (:func:`crop_shapes`): the nearest of ``iterations + 1`` tried,
-    with its crops (``"clouds"``)."""
+                iterations: int) -> tuple[dict, list[dict]]:  # fmt: skip
+    """The stretch of ``family`` fitted to ``real`` (:func:`crop_shapes`): the nearest of ``iterations + 1`` tried (the
+    record), and its crops' :func:`_crop_stats`."""
     lo, hi = 1.0, 1.0
-    steps = []
+    steps, crop_stats = [], []
     for step in range(iterations + 1):
-        clouds = _simulated(family, size, sensor, (lo, hi), objects=objects, crops=crops, seed=seed)
-        sim = crop_shapes(clouds)
-        steps.append({"width_scale": [lo, hi], "simulated": sim, "distance": _distance(sim, real), "clouds": clouds})
+        crop_stats.append(_crop_stats(_simulated(family, size, sensor, (lo, hi), objects=objects, crops=crops, seed=seed)))
+        sim = _summary(crop_stats[-1])
+        steps.append({"width_scale": [lo, hi], "simulated": sim, "distance": _distance(sim, real)})
         if sim["crops"] < MIN_FIT_CROPS or step == iterations:
             break
         (s10, s50, s90), (r10, r50, r90) = sim["height_to_width"], real["height_to_width"]
@@ -187,21 +196,21 @@ def _fit_family(family: str, real: dict, size: SizeRange, sensor, *, objects: in
         centre += math.log(s50 / r50)  # height / width goes as 1 / stretch: a taller ratio than the real one widens
         half = max(0.0, half + 0.25 * (math.log(r90 / r10) - math.log(s90 / s10)))  # a spread narrower than the real one widens the range
         lo, hi = (float(np.clip(math.exp(v), MIN_WIDTH_SCALE, MAX_WIDTH_SCALE)) for v in (centre - half, centre + half))
-    best = min(steps, key=lambda st: st["distance"])
-    return {**best, "steps": [{"width_scale": st["width_scale"], "height_to_width": st["simulated"]["height_to_width"],
-                               "crops": st["simulated"]["crops"], "distance": st["distance"]} for st in steps]}  # fmt: skip
+    best = min(range(len(steps)), key=lambda k: steps[k]["distance"])
+    return {**steps[best], "steps": [{"width_scale": st["width_scale"], "height_to_width": st["simulated"]["height_to_width"],
+                                      "crops": st["simulated"]["crops"], "distance": st["distance"]} for st in steps]}, crop_stats[best]  # fmt: skip
 
 
-def _choose(tried: Mapping[str, dict], real: dict) -> tuple[list[str], float]:
+def _choose(tried: Mapping[str, dict], crop_stats: Mapping[str, list[dict]], real: dict) -> tuple[list[str], float]:
     """The families a class takes (module docstring): the nearest, then each next, nearest first, whose crops
-    (``tried[name]["clouds"]``) brought into the chosen ones' bring the union nearer ``real``; and the union's distance."""
+    (their ``crop_stats``) brought into the chosen ones' bring the union nearer ``real``; and the union's distance."""
     order = sorted((n for n, t in tried.items() if math.isfinite(t["distance"])), key=lambda n: tried[n]["distance"])
     if not order:
         return [], math.inf
-    chosen, pool, distance = [order[0]], list(tried[order[0]]["clouds"]), tried[order[0]]["distance"]
+    chosen, pool, distance = [order[0]], list(crop_stats[order[0]]), tried[order[0]]["distance"]
     for name in order[1:]:
-        candidate = pool + tried[name]["clouds"]
-        joined = _distance(crop_shapes(candidate), real)
+        candidate = pool + crop_stats[name]
+        joined = _distance(_summary(candidate), real)
         if joined < distance:
             chosen, pool, distance = [*chosen, name], candidate, joined
     return chosen, distance
@@ -259,11 +268,12 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
         target = crop_shapes(real[cls])
         if not names or cls not in sizes or target["crops"] < MIN_FIT_CROPS:
             continue
-        tried = {}
+        tried, crop_stats = {}, {}
         for name in names:
             log.info("fitting the %s family to %d %s crops", name, target["crops"], cls)
-            tried[name] = _fit_family(name, target, sizes[cls], sensor, objects=objects, crops=crops, seed=seed, iterations=iterations)
-        chosen, joined = _choose(tried, target)
+            tried[name], crop_stats[name] = _fit_family(name, target, sizes[cls], sensor, objects=objects, crops=crops, seed=seed,
+                                                        iterations=iterations)  # fmt: skip
+        chosen, joined = _choose(tried, crop_stats, target)
         if not chosen:
             continue
         own = crop_shapes(_scanned(meshes[cls], sizes[cls], sensor, crops=crops, seed=seed)) if meshes and meshes.get(cls) else None
@@ -272,7 +282,6 @@ def fit_families(real: Mapping[str, Sequence[NDArray[np.floating]]], sensor, siz
             chosen = []
         for t in tried.values():
             t["distance"] = _json_distance(t["distance"])
-            del t["clouds"]
         entry = {"real": target, "tried": tried, "chosen_distance": _json_distance(joined)}
         if own is not None:
             entry["meshes"] = {**own, "objects": len(meshes[cls]), "distance": _json_distance(own_distance)}

@@ -61,7 +61,8 @@ _IGN_COUNTS = 1.67e9
 _IGN_FLOOR_COUNTS = 23.0
 _IGN_RANGE_RESOLUTION_M = 0.83
 _POWER_NOISE = 0.3
-_IGN_RECEIVER = "; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), 0.83 m, 23 counts"  # a RIEGL preset's source ends with it
+#: The end of a RIEGL preset's beam source: where its receiver comes from.
+_IGN_RECEIVER = f"; receiver: the IGN LiDAR HD sample's RIEGL (fit-sensor), {_IGN_RANGE_RESOLUTION_M:g} m, {_IGN_FLOOR_COUNTS:g} counts"
 
 
 def _airborne_beam(name: str, source: str, **fields) -> Beam:
