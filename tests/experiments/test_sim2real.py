@@ -158,6 +158,10 @@ def test_sim2real_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "other settings" in capsys.readouterr().err
     assert main([*argv, "--augment", "aspect", "--keep-scale"]) == 2
     assert "--augment aspect" in capsys.readouterr().err
+    assert main([*argv, "--augment", "partial"]) == 2  # so is the partial one
+    assert "other settings" in capsys.readouterr().err
+    assert main([*argv, "--augment", "partial", "--keep-scale"]) == 2
+    assert "--augment partial" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("option, value", [("--seeds", "0"), ("--points", "-3"), ("--per-class", "x"), ("--up", "y")])
@@ -1024,6 +1028,8 @@ def test_config_messages_name_the_fields_or_the_flags_given() -> None:
 
     cases = [({"validate_on": "fit-half"}, "validate_on fit-half needs fit_sensor", "--validate-on fit-half needs --fit-sensor"),
              ({"aspect": True, "keep_scale": True}, "aspect needs augmentation, which keep_scale", "--augment aspect needs augmentation, which --keep-scale"),
+             ({"partial": True, "keep_scale": True}, "partial needs augmentation, which keep_scale", "--augment partial needs augmentation, which --keep-scale"),
+             ({"partial": True, "aspect": True}, "aspect and partial are two augmentations", "--augment aspect and --augment partial are two"),
              ({"fitted_shape": ("outline",)}, "fitted_shape needs fit_sensor", "--fitted-shape needs --fit-sensor"),
              ({"occluded_elevation_deg": (10.0, 95.0)}, "occluded_elevation_deg must be", "--occluded-elevation must be"),
              ({"seeds": 0}, "seeds must be >= 1", "--seeds must be >= 1"),

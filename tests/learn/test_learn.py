@@ -178,6 +178,8 @@ def test_training_is_deterministic_and_resume_is_exact(tmp_path):
     # the aspect augmentation reaches the batches: the same seed trains other weights
     aspect = train(data, 2, TrainConfig(epochs=1, aspect=True, **cfg), progress=False)
     assert any(not torch.equal(v, _state(aspect.model)[k]) for k, v in _state(c1.model).items())
+    partial = train(data, 2, TrainConfig(epochs=1, partial=True, **cfg), progress=False)  # and the partial one
+    assert any(not torch.equal(v, _state(partial.model)[k]) for k, v in _state(c1.model).items())
     with pytest.raises(InvalidInputError, match="another configuration"):
         train(data, 2, TrainConfig(epochs=2, **{**cfg, "seed": 7}), checkpoint_dir=tmp_path, progress=False)
     assert (tmp_path / "best.pt").is_file() and (tmp_path / "history.json").is_file()
@@ -252,6 +254,67 @@ def test_aspect_is_off_by_default_and_draws_new_proportions_when_on():
         TrainConfig(aspect=True, augment=False)
     for recipe in RECIPES.values():  # it goes with either recipe
         assert TrainConfig(aspect=True, **recipe).aspect and "aspect" not in TrainConfig(**recipe).identity(("seed",))
+
+
+def _as_subset(out: np.ndarray, cloud: np.ndarray) -> np.ndarray | None:
+    """The rows of ``cloud`` whose normalisation gives ``out``'s points (a positive scale and a shift, no turn), or None."""
+    u = np.unique(out, axis=0)
+    top, bottom = u[np.argmax(u[:, 2])], u[np.argmin(u[:, 2])]
+    if top[2] == bottom[2]:
+        return None
+    pair = cloud[:, None, :] - cloud[None, :, :]  # (a, b): cloud[a] - cloud[b]
+    scale = pair[..., 2] / (top[2] - bottom[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fits = (scale > 0) & (np.abs(pair / scale[..., None] - (top - bottom)).max(axis=2) < 1e-5)
+    for a, b in zip(*np.nonzero(fits)):
+        back = u * scale[a, b] + (cloud[a] - top * scale[a, b])
+        match = np.abs(back[:, None, :] - cloud[None, :, :]).max(axis=2) < 1e-5
+        if match.any(axis=1).all():
+            return np.flatnonzero(match.any(axis=0))
+    return None
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_partial_keeps_a_normalised_subset_above_a_cut_of_at_most_the_bottom_three_tenths(seed: int):
+    rng = np.random.default_rng(seed)
+    pts = D.normalize_batch(rng.uniform(-1, 1, (6, 40, 3)))
+    out = D.augment(pts, np.random.default_rng(seed), rotate=False, scale=False, jitter=False, partial=True)
+    assert out.shape == pts.shape and out.dtype == np.float32
+    for cloud, o in zip(pts, out):
+        if np.array_equal(cloud, o):  # a cloud left whole
+            continue
+        np.testing.assert_allclose(np.ptp(o, axis=0).max(), 1.0, rtol=1e-5)  # re-normalised
+        kept = _as_subset(o, cloud)
+        assert kept is not None, "not a subset of the cloud's own points"
+        z = (cloud[:, 2] - cloud[:, 2].min()) / np.ptp(cloud[:, 2])
+        # everything above the highest cut could be kept; the dropout keeps at least an eighth of what the cut leaves
+        assert len(kept) >= np.ceil((1 - D.PARTIAL_DROPOUT_MAX) * np.count_nonzero(z >= D.PARTIAL_CUT_MAX)) - 1e-9
+        assert len(np.unique(o, axis=0)) == len(kept)
+
+
+def test_partial_is_off_by_default_and_cuts_and_thins_half_the_clouds():
+    rng = np.random.default_rng(0)
+    pts = D.normalize_batch(rng.uniform(-1, 1, (400, 60, 3)))
+    plain = D.augment(pts, np.random.default_rng(1))
+    np.testing.assert_array_equal(plain, D.augment(pts, np.random.default_rng(1), partial=False))
+    out = D.augment(pts, np.random.default_rng(1), rotate=False, scale=False, jitter=False, partial=True)
+    changed = [i for i in range(len(pts)) if not np.array_equal(out[i], pts[i])]
+    assert 0.4 < len(changed) / len(pts) < 0.6  # PARTIAL_SHARE
+    lowest, share = [], []
+    for i in changed[:60]:
+        kept = _as_subset(out[i], pts[i])
+        z = (pts[i, :, 2] - pts[i, :, 2].min()) / np.ptp(pts[i, :, 2])
+        lowest.append(z[kept].min())
+        share.append(len(kept) / len(pts[i]))
+    # the bottom cut reaches up to three tenths of the height (and not past it but for the dropout); a cloud keeps
+    # from an eighth of its points to nearly all of them
+    assert 0.2 < np.quantile(lowest, 0.9) and np.median(lowest) < D.PARTIAL_CUT_MAX
+    assert min(share) < 0.25 and max(share) > 0.75
+    # a training run's setting: left out of the identity when off, refused without augment
+    assert "partial" not in TrainConfig().identity(("seed",)) and TrainConfig(partial=True).identity(("seed",))["partial"] is True
+    with pytest.raises(InvalidInputError, match="partial"):
+        TrainConfig(partial=True, augment=False)
 
 
 def test_resample_and_split():

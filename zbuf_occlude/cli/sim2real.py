@@ -63,7 +63,7 @@ OPTION_NAMES = {
     "per_class": "--per-class", "seeds": "--seeds", "keep_scale": "--keep-scale", "label_map": "--label-map", "up": "--up",
     "up_map": "--up-map", "sizes": "--sizes", "min_returns": "--min-returns", "method": "--method", "classes": "--classes",
     "occluded_elevation_deg": "--occluded-elevation", "fit_sensor": "--fit-sensor", "recipe": "--recipe",
-    "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "best_epoch_by": "--best-epoch-by",
+    "validate_on": "--validate-on", "fitted_shape": "--fitted-shape", "aspect": "--augment aspect", "partial": "--augment partial", "best_epoch_by": "--best-epoch-by",
     "occluded_points": "--occluded-points", "returns": "--returns", "footprint_cast": "--footprint-cast",
     "fit_families": "--fit-families", "family_count": "--family-count", "family_heights": "--fit-family-heights", "sets": "--sets",
 }  # fmt: skip
@@ -116,7 +116,7 @@ def sim2real_config(args: argparse.Namespace) -> Sim2RealConfig:
         fit_sensor=args.fit_sensor,
         recipe=args.recipe, best_epoch_by=args.best_epoch_by, validate_on=args.validate_on,
         fitted_shape=() if args.fitted_shape == "none" else tuple(v.strip() for v in args.fitted_shape.split(",")),
-        aspect=args.augment == "aspect", occluded_points=args.occluded_points, returns=args.returns,
+        aspect=args.augment == "aspect", partial=args.augment == "partial", occluded_points=args.occluded_points, returns=args.returns,
         footprint_cast=args.footprint_cast, sets=sets, **families, option_names=OPTION_NAMES,
     )  # fmt: skip
 
@@ -211,11 +211,12 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--augment",
-        choices=("standard", "aspect"),
+        choices=("standard", "aspect", "partial"),
         default="standard",
         help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
-        "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]; not with --keep-scale) "
-        "(default: %(default)s)",
+        "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]) or partial (also partial "
+        "objects: half the clouds lose up to 0.3 of their height from the bottom and up to 0.875 of their points); "
+        "not with --keep-scale (default: %(default)s)",
     )
     p.add_argument(
         "--scale",

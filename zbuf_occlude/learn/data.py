@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import os
 import re
 from collections.abc import Sequence
@@ -48,6 +49,16 @@ JITTER_SIGMA, JITTER_CLIP = 0.01, 0.05
 #: ACM TOG 2019; its ``data.py``, ``translate_pointcloud``: ``uniform(2/3, 3/2, size=3)``), without
 #: its translation (every cloud here is centred on its bounding box, the real ones too).
 ASPECT_RANGE = (2.0 / 3.0, 3.0 / 2.0)
+#: Share of the clouds the ``partial`` augmentation makes partial (the others pass unchanged).
+PARTIAL_SHARE = 0.5
+#: Most of a cloud's height the ``partial`` augmentation cuts from its bottom, as a real object segmented from a scan
+#: loses its lowest returns to the ground filter or to what stands in front.  No published figure: read on the fit
+#: half of LiDARNet's scans, where the far bushes' lowest return lies 1.3 m below the sensor against 1.8 m for the
+#: near ones', on crowns 2-3 m tall.
+PARTIAL_CUT_MAX = 0.3
+#: Largest share of a cloud's points the ``partial`` augmentation drops at random: PointNet++'s random input dropout
+#: (Qi et al., NeurIPS 2017; its ``provider.py``, ``random_point_dropout``: ``max_dropout_ratio=0.875``).
+PARTIAL_DROPOUT_MAX = 0.875
 
 
 @dataclass
@@ -162,9 +173,9 @@ def from_meshes(
 
 
 def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bool = True,
-            scale: bool = True, jitter: bool = True, aspect: bool = False) -> NDArray[np.float32]:  # fmt: skip
+            scale: bool = True, jitter: bool = True, aspect: bool = False, partial: bool = False) -> NDArray[np.float32]:  # fmt: skip
     """Random rotation about the up (z) axis, isotropic scaling and Gaussian jitter, per cloud;
-    with ``aspect``, random proportions too.
+    with ``aspect``, random proportions too; with ``partial``, partial objects too.
 
     Parameters
     ----------
@@ -178,6 +189,12 @@ def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bo
         the rotation, and re-normalise: the proportions change (a post as thick as a trunk, a
         tree as low as a shrub), the size is the isotropic scaling's alone.  Off by default,
         so that the draws of runs without it are unchanged.
+    partial : bool
+        Before the other steps, make :data:`PARTIAL_SHARE` of the clouds partial, as far and half-hidden real
+        objects are: cut a share ``U(0, 0.3)`` of the cloud's height from its bottom (:data:`PARTIAL_CUT_MAX`), drop
+        a share ``U(0, 0.875)`` of the points left at random (:data:`PARTIAL_DROPOUT_MAX`, at least one kept), and
+        fill the cloud up again with repeats of the points kept (as a sparse real crop is), re-normalised.  Off by
+        default, so that the draws of runs without it are unchanged.
 
     Returns
     -------
@@ -187,6 +204,8 @@ def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bo
     """
     b, n, _ = points.shape
     out = np.asarray(points, dtype=np.float32)
+    if partial:
+        out = _partial(out, rng)
     if rotate:
         theta = rng.uniform(0.0, 2 * np.pi, b)
         c, s = np.cos(theta), np.sin(theta)
@@ -200,6 +219,23 @@ def augment(points: NDArray[np.float32], rng: np.random.Generator, *, rotate: bo
     if jitter:
         out = out + np.clip(rng.normal(0.0, JITTER_SIGMA, out.shape), -JITTER_CLIP, JITTER_CLIP).astype(np.float32)
     return out.astype(np.float32, copy=False)
+
+
+def _partial(points: NDArray[np.float32], rng: np.random.Generator) -> NDArray[np.float32]:
+    """:func:`augment`'s ``partial`` step on ``(B, N, 3)`` normalised clouds (z up)."""
+    b, n, _ = points.shape
+    chosen = rng.random(b) < PARTIAL_SHARE
+    cut = rng.uniform(0.0, PARTIAL_CUT_MAX, b)
+    kept_share = 1.0 - rng.uniform(0.0, PARTIAL_DROPOUT_MAX, b)
+    order = rng.random((b, n))
+    out = points.copy()
+    for i in np.flatnonzero(chosen):
+        z = points[i, :, 2]
+        above = np.flatnonzero(z >= z.min() + cut[i] * (z.max() - z.min()))  # never empty: the top point stays
+        kept = above[np.argsort(order[i, above], kind="stable")[: max(1, math.ceil(kept_share[i] * len(above)))]]
+        filled = np.concatenate([kept, kept[rng.integers(0, len(kept), n - len(kept))]])
+        out[i] = normalize_batch(points[i, filled][None])[0]
+    return out
 
 
 def mesh_content_key(path: str | os.PathLike) -> str:

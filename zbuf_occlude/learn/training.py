@@ -85,7 +85,7 @@ SELECT_CHOICES = ("accuracy", "mean_class_accuracy", "loss")
 #: The recipes by name (``experiment sim2real --recipe``).
 RECIPES = {"plain": PLAIN_RECIPE, "stable": STABLE_RECIPE}
 #: Fields a run's identity leaves out at these values (:meth:`TrainConfig.identity`): options newer than some runs.
-_IDENTITY_DEFAULTS = {**PLAIN_RECIPE, "aspect": False}
+_IDENTITY_DEFAULTS = {**PLAIN_RECIPE, "aspect": False, "partial": False}
 
 
 @dataclass
@@ -111,6 +111,9 @@ class TrainConfig:
     aspect : bool
         With ``augment``, random proportions too (:func:`~zbuf_occlude.learn.data.augment`'s
         ``aspect``: x, y and z stretched by independent factors in [2/3, 3/2]).
+    partial : bool
+        With ``augment``, partial objects too (:func:`~zbuf_occlude.learn.data.augment`'s ``partial``: half the
+        clouds lose up to 0.3 of their height from the bottom and up to 0.875 of their points).
     balance : {"none", "sampler"}
         ``sampler``: class-balanced epochs (module docstring).
     select : {"accuracy", "mean_class_accuracy", "loss"}
@@ -141,6 +144,7 @@ class TrainConfig:
     fv_grid: int = 8
     augment: bool = True
     aspect: bool = False
+    partial: bool = False
     balance: str = "none"
     select: str = "accuracy"
     warmup_epochs: int = 0
@@ -163,8 +167,9 @@ class TrainConfig:
             raise InvalidInputError(f"balance must be none or sampler, got {self.balance!r}")
         if self.select not in SELECT_CHOICES:
             raise InvalidInputError(f"select must be one of {', '.join(SELECT_CHOICES)}, got {self.select!r}")
-        if self.aspect and not self.augment:
-            raise InvalidInputError("aspect is an augmentation: it needs augment=True")
+        for name in ("aspect", "partial"):
+            if getattr(self, name) and not self.augment:
+                raise InvalidInputError(f"{name} is an augmentation: it needs augment=True")
         if self.warmup_epochs < 0 or (self.grad_clip is not None and not self.grad_clip > 0):
             raise InvalidInputError(f"need warmup_epochs >= 0 and grad_clip > 0 or None, got {self.warmup_epochs}, {self.grad_clip}")
 
@@ -173,8 +178,8 @@ class TrainConfig:
 
     def identity(self, exclude: tuple[str, ...]) -> dict:
         """The fields that make results differ, for a checkpoint's or a run's settings: all but
-        ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values and ``aspect`` off
-        left out (so a config from before those options existed compares equal)."""
+        ``exclude``, with recipe options at their :data:`PLAIN_RECIPE` values and ``aspect`` and ``partial``
+        off left out (so a config from before those options existed compares equal)."""
         return {
             k: v for k, v in self.to_dict().items() if k not in exclude and not (k in _IDENTITY_DEFAULTS and v == _IDENTITY_DEFAULTS[k])
         }
@@ -449,7 +454,7 @@ def _train_epoch(run: _Run, train_set: CloudSet, config: TrainConfig, epoch: int
             continue
         pts = train_set.points[rows]
         if config.augment:
-            pts = augment(pts, rng, aspect=config.aspect)
+            pts = augment(pts, rng, aspect=config.aspect, partial=config.partial)
         x = torch.from_numpy(np.ascontiguousarray(pts)).to(device)
         y = torch.from_numpy(train_set.labels[rows]).to(device)
         step = epoch * n_batches + i // config.batch_size

@@ -184,6 +184,10 @@ class Sim2RealConfig:
         Every run's augmentation also draws random proportions (x, y and z stretched by
         independent factors in [2/3, 3/2], DGCNN's range; :func:`zbuf_occlude.learn.data.augment`),
         real→real's too.  Not with ``keep_scale``, which turns augmentation off.
+    partial : bool
+        Every run's augmentation also makes half the clouds partial (up to 0.3 of the height cut from the bottom, up
+        to 0.875 of the points dropped; :func:`zbuf_occlude.learn.data.augment`), real→real's too.  Not with
+        ``keep_scale`` nor with ``aspect``.
     fit_families : bool
         Fit the procedural families (:data:`~zbuf_occlude.mesh.families.FAMILIES`) of each class to
         the fixed first half of the real scans (the half real→real trains on, the fit half with
@@ -216,7 +220,7 @@ class Sim2RealConfig:
     ------
     InvalidInputError
         A bad setting (an unknown scale, recipe, model or validation choice, seeds below 1,
-        ``aspect`` with ``keep_scale``, ``occluded_points`` with ``method`` point-splat,
+        ``aspect`` or ``partial`` with ``keep_scale``, both together, ``occluded_points`` with ``method`` point-splat,
         ``validate_on="fit-half"`` or ``fitted_shape`` without
         ``fit_sensor``, an unknown shape or two that meet the widths, elevations outside
         [-90, 90] degrees, a sensor that is no LiDAR, ``fit_sensor`` with an airborne
@@ -250,6 +254,7 @@ class Sim2RealConfig:
     validate_on: str = "meshes"
     fitted_shape: tuple[str, ...] = ()
     aspect: bool = False
+    partial: bool = False
     occluded_points: bool = False
     returns: int | str = TRAINING_RETURNS
     footprint_cast: str = "auto"
@@ -282,8 +287,11 @@ class Sim2RealConfig:
             raise InvalidInputError(f"{n('recipe')} must be one of {sorted(RECIPES)}, got {self.recipe!r}")
         if self.best_epoch_by is not None and self.best_epoch_by not in SELECT_CHOICES:
             raise InvalidInputError(f"{n('best_epoch_by')} must be one of {', '.join(SELECT_CHOICES)}, got {self.best_epoch_by!r}")
-        if self.aspect and self.keep_scale:
-            raise InvalidInputError(f"{n('aspect')} needs augmentation, which {n('keep_scale')} turns off")
+        for name in ("aspect", "partial"):
+            if getattr(self, name) and self.keep_scale:
+                raise InvalidInputError(f"{n(name)} needs augmentation, which {n('keep_scale')} turns off")
+        if self.aspect and self.partial:
+            raise InvalidInputError(f"{n('aspect')} and {n('partial')} are two augmentations: choose one")
         if int(self.seeds) < 1:
             raise InvalidInputError(f"{n('seeds')} must be >= 1, got {self.seeds}")
         self._check_validation(n)
@@ -409,7 +417,7 @@ class Sim2RealConfig:
         sc = self.scale_values
         return TrainConfig(model=self.model, epochs=int(self.epochs or sc.epochs), patience=sc.patience, width=sc.width[self.model],
                            fv_grid=sc.fv_grid, seed=seed, device=device, threads=threads, augment=not self.keep_scale,
-                           aspect=bool(self.aspect), **{**RECIPES[self.recipe], **({"select": self.best_epoch_by} if self.best_epoch_by else {})})  # fmt: skip
+                           aspect=bool(self.aspect), partial=bool(self.partial), **{**RECIPES[self.recipe], **({"select": self.best_epoch_by} if self.best_epoch_by else {})})  # fmt: skip
 
     def identity(self) -> dict[str, Any]:
         """The settings that make results differ, as ``settings.json`` holds them (JSON types).
