@@ -17,8 +17,8 @@ from zbuf_occlude.sensors.crops import (
     Placement,
     draw_placement,
     object_crop,
-    side_occluders,
 )
+from zbuf_occlude.sensors.scene.occluders import side_occluders
 from zbuf_occlude.sensors.fit import (
     across_sight_width,
     fit_object_shape,

@@ -6,7 +6,7 @@ that set it are the rows of :data:`CROP_OPTIONS`: :func:`add_crop_arguments` add
 command's parser, :func:`crop_settings` turns what was parsed into the library's settings,
 which check every value themselves (:class:`~zbuf_occlude.sensors.placement.CropDistributions`,
 and the width a mesh is fitted to where it is used: :class:`~zbuf_occlude.sensors.placement.ObjectPlacement`,
-:class:`~zbuf_occlude.farm.config.SensorCropParams`); a message names the option as it was typed.
+:class:`~zbuf_occlude.farm.sensor_params.SensorCropParams`); a message names the option as it was typed.
 
 Each option has two names that both commands take: ``--distance`` and ``--sensor-distance``,
 ``--hidden-below`` and ``--sensor-hidden-below``, ...  ``scan`` lists the short name first (it

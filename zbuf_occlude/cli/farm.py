@@ -25,12 +25,8 @@ from zbuf_occlude.defaults import (
 from zbuf_occlude.defaults import DEFAULT_RESOLUTION as GENERATE_RESOLUTION
 from zbuf_occlude.defaults import DEFAULT_VIEWS as GENERATE_VIEWS
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.farm.config import (
-    FARM_CROP_DISTRIBUTIONS,
-    FarmParams,
-    SensorCropParams,
-    usable_cpus,
-)
+from zbuf_occlude.farm.config import FarmParams, usable_cpus
+from zbuf_occlude.farm.sensor_params import FARM_CROP_DISTRIBUTIONS, SensorCropParams
 from zbuf_occlude.farm.shards import parse_shard
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS
 from zbuf_occlude.mesh.paths import SPLITS

@@ -213,10 +213,9 @@ def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
         "--augment",
         choices=("standard", "aspect", "partial"),
         default="standard",
-        help="training augmentation of every run: standard (rotation about z, scaling, jitter) or aspect (also "
-        "random proportions: x, y, z stretched by independent factors in [2/3, 3/2]) or partial (also partial "
-        "objects: half the clouds lose up to 0.3 of their height from the bottom and up to 0.875 of their points); "
-        "not with --keep-scale (default: %(default)s)",
+        help="training augmentation of every run, not with --keep-scale: standard (rotation about z, scaling, jitter), aspect (also x, y, "
+        "z stretched by factors in [2/3, 3/2]) or partial (also half the clouds cut up to 0.3 of their height from the bottom and "
+        "thinned by up to 0.875) (default: %(default)s)",
     )
     p.add_argument(
         "--scale",

@@ -27,7 +27,8 @@ option checked before any mesh is loaded (``checks``).  ``zbuf-occlude generate`
 engine with one worker, its own defaults and npz/ply/h5 writers (``generate``).
 
 Modules: ``inputs`` (discovering objects, shards), ``config`` (parameters, constants,
-journal paths), ``checks`` (up-front checks), ``worker`` (one object), ``journal`` (records,
+journal paths), ``options`` (the option of each parameter), ``sensor_params`` (``--sensor``'s
+parameters), ``checks`` (up-front checks), ``worker`` (one object), ``journal`` (records,
 manifest, card, summary), ``lock``, ``lifecycle``, ``run`` (executors, :func:`run_farm`,
 :func:`merge_farm`), ``generate``, ``shards`` (``--shard I/N``).  The objects it renders come
 from :mod:`zbuf_occlude.mesh.inputs.plan`; its commands are in :mod:`zbuf_occlude.cli.farm`.

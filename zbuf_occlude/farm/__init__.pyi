@@ -8,7 +8,6 @@ from .config import (
     PAPER_SAMPLES_PER_MB,
     FarmParams,
     RunOptions,
-    SensorCropParams,
     shard_path,
 )
 from .generate import generate
@@ -16,5 +15,6 @@ from .journal import FarmSummary
 from .lifecycle import Terminated
 from .lock import DatasetBusy, farm_lock
 from .run import merge_farm, run_farm
+from .sensor_params import SensorCropParams
 from .shards import parse_shard, select_shard
 from .worker import process_object

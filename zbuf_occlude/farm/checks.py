@@ -17,7 +17,8 @@ from pathlib import Path
 from zbuf_occlude.dataset.storage import ObjectSize, StorageKind, storage_kind
 from zbuf_occlude.defaults import DEFAULT_METHOD
 from zbuf_occlude.errors import BackendUnavailable, CameraError, InvalidInputError
-from zbuf_occlude.farm.config import OPTION_NAMES, FarmParams
+from zbuf_occlude.farm.config import FarmParams
+from zbuf_occlude.farm.options import OPTION_NAMES
 from zbuf_occlude.mesh.paths import printable_path
 from zbuf_occlude.mesh.inputs.plan import FarmObject
 from zbuf_occlude.mesh.inputs.kinds import POINT_SET, POINT_SET_METHOD, plan_kind

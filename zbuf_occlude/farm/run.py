@@ -31,11 +31,11 @@ from zbuf_occlude.farm.checks import (
 )
 from zbuf_occlude.farm.config import (
     MANIFEST_INTERVAL_S,
-    OPTION_NAMES,
     FarmParams,
     RunOptions,
     record_path,
 )
+from zbuf_occlude.farm.options import OPTION_NAMES
 from zbuf_occlude.farm.journal import (
     FarmSummary,
     check_out_layout,

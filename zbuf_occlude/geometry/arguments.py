@@ -1,4 +1,4 @@
-"""The checks of the public API's arguments: one per kind (mesh, camera, points, face index).
+"""The checks of the public API's arguments: one per kind (mesh, camera, points, face index, a count, a number >= 0, a flag).
 
 A wrong kind of argument (a file name where a mesh goes, ``(30, 45)`` where a camera goes, text
 where points go) is an :class:`~zbuf_occlude.errors.ArgumentTypeError` (a ``TypeError``) saying
@@ -9,6 +9,8 @@ function that takes these arguments calls these checks first.
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 from typing import Any
 
@@ -18,7 +20,7 @@ from numpy.typing import NDArray
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
 from zbuf_occlude.geometry.cameras import Camera
 
-__all__ = ["check_camera", "check_face_index", "check_mesh", "check_points", "described"]
+__all__ = ["check_camera", "check_count", "check_face_index", "check_mesh", "check_flag", "check_nonnegative", "check_points", "described"]
 
 #: Characters of a value quoted in a message.
 _SHOWN = 60
@@ -117,3 +119,44 @@ def check_face_index(face_index: Any, n_points: int, n_faces: int) -> NDArray[np
     if n_points and (fi.min() < 0 or fi.max() >= n_faces):
         raise InvalidInputError(f"face_index out of range [0, {n_faces})")
     return fi
+
+
+def _shown(value: object) -> str:
+    """``repr(value)`` for a message; an integer too long for ``repr`` (over 4,300 digits) by its size."""
+    if isinstance(value, numbers.Integral) and abs(int(value)).bit_length() > 1024:
+        return f"an integer of about {int(abs(int(value)).bit_length() * math.log10(2)) + 1:,} digits"
+    return repr(value)
+
+
+def _number(value: object, name: str) -> float:
+    """``value`` as a float when it is a real number (not a bool, not text): else ArgumentTypeError."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        raise ArgumentTypeError(f"{name} must be a number, got {described(value)}")
+    try:
+        return float(value)
+    except OverflowError:  # an int too large for a float
+        return math.inf
+
+
+def check_nonnegative(value: object, name: str, high: float = math.inf) -> float:
+    """``value`` as a float, a real number (else ArgumentTypeError), finite and in ``[0, high]`` (else InvalidInputError)."""
+    v = _number(value, name)
+    if not math.isfinite(v) or not 0 <= v <= high:
+        raise InvalidInputError(f"{name} must be finite and >= 0{f' and <= {high:g}' if high < math.inf else ''}, got {_shown(value)}")
+    return v
+
+
+def check_count(value: object, name: str) -> int:
+    """``value`` as an int, a real number (else ArgumentTypeError), whole and at least 1 (else InvalidInputError)."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
+    if not isinstance(value, numbers.Integral) or int(value) < 1:
+        raise InvalidInputError(f"{name} must be an integer >= 1, got {_shown(value)}")
+    return int(value)
+
+
+def check_flag(value: object, name: str) -> bool:
+    """``value`` as a bool: ``True`` or ``False`` (numpy's too), else ArgumentTypeError (``1`` and ``"yes"`` are no flags)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ArgumentTypeError(f"{name} must be True or False, got {described(value)}")
+    return bool(value)

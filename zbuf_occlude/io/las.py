@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from zbuf_occlude._version import __version__
 from zbuf_occlude.defaults import MAX_POINTS
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError, ZbufOccludeError
-from zbuf_occlude.geometry.arguments import check_points, described
+from zbuf_occlude.geometry.arguments import check_flag, check_points, described
 from zbuf_occlude.io.caps import MAX_LAS_BYTES, MAX_VLR_RECORD_BYTES
 from zbuf_occlude.io.file_errors import parser_failure
 from zbuf_occlude.io.las_crs import epsg_crs, linear_unit_m
@@ -481,8 +481,7 @@ def las_bytes(
 
     pts = check_points(points)
     n = len(pts)
-    if not isinstance(compress, (bool, np.bool_)):
-        raise ArgumentTypeError(f"compress must be True or False, got {described(compress)}")
+    check_flag(compress, "compress")
     returns = _per_point(return_number, "return_number", n, kinds="iu", low=1, high=15, dtype=np.uint8)
     count = _per_point(number_of_returns, "number_of_returns", n, kinds="iu", low=1, high=15, dtype=np.uint8)
     if np.any(returns > count):
@@ -503,8 +502,7 @@ def las_bytes(
     survey = SurveyFields() if survey is None else survey
     if not isinstance(survey, SurveyFields):
         raise ArgumentTypeError(f"survey must be a SurveyFields or None, got {described(survey)}")
-    if not isinstance(survey.adjusted_standard_gps_time, (bool, np.bool_)):
-        raise ArgumentTypeError(f"adjusted_standard_gps_time must be True or False, got {described(survey.adjusted_standard_gps_time)}")
+    check_flag(survey.adjusted_standard_gps_time, "adjusted_standard_gps_time")
     extra = _extra_bytes(n, survey.object_id, survey.class_index, survey.class_names)
     wkt_crs = None if survey.crs is None else epsg_crs(survey.crs)
     offsets, stored = _scaled(pts, survey.scale)

@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import MAX_POINTS, MAX_SAMPLES, MAX_SEED
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-from zbuf_occlude.geometry.arguments import check_points, described
+from zbuf_occlude.geometry.arguments import check_flag, check_points, described
 from zbuf_occlude.geometry.cameras import DEFAULT_RADIUS, camera_on_sphere
 from zbuf_occlude.geometry.samples import derive_rng, draw_sample
 from zbuf_occlude.io.point_sets import POINT_SET_SUFFIXES, PointSet
@@ -118,12 +118,6 @@ def _whole(value: object, name: str, *, low: int, high: int) -> int:
     if not is_number(value):
         raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
     return count(value, name, low=low, high=high)
-
-
-def _flag(value: object, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise ArgumentTypeError(f"{name} must be True or False, got {described(value)}")
-    return bool(value)
 
 
 class SharedEpoch:
@@ -190,7 +184,7 @@ class PoseDistribution:
         object.__setattr__(self, "elevation_deg", reals(self.elevation_deg, "elevation_deg", lengths=(2,)))
         object.__setattr__(self, "azimuth_deg", reals(self.azimuth_deg, "azimuth_deg", lengths=(2,)))
         object.__setattr__(self, "radius", real(self.radius, "radius", low=0.0, low_open=True))
-        object.__setattr__(self, "uniform_area", _flag(self.uniform_area, "uniform_area"))
+        object.__setattr__(self, "uniform_area", check_flag(self.uniform_area, "uniform_area"))
         (el0, el1), (az0, az1) = self.elevation_deg, self.azimuth_deg
         if not (-90.0 <= el0 <= el1 <= 90.0) or not (az0 <= az1) or not all(map(math.isfinite, (az0, az1, self.radius))):
             raise InvalidInputError(
@@ -325,7 +319,7 @@ class RandomOcclusion:
             raise ArgumentTypeError(f"poses must be a PoseDistribution, got {described(poses)}")
         if not isinstance(method, str):
             raise ArgumentTypeError(f"method must be the name of a visibility method, got {described(method)}")
-        self.n_points, self.poses, self.normalize = n_points, poses, _flag(normalize, "normalize")
+        self.n_points, self.poses, self.normalize = n_points, poses, check_flag(normalize, "normalize")
         self.seed = _whole(seed, "seed", low=0, high=MAX_SEED)
         self.method = method_info(method).name
         self._epoch = SharedEpoch()
@@ -624,7 +618,7 @@ class EpochSampler(require_torch().utils.data.Sampler):
     """
 
     def __init__(self, data_source, *, shuffle: bool = False, seed: int = 0):
-        self.n, self.shuffle, self.epoch = len(data_source), _flag(shuffle, "shuffle"), 0
+        self.n, self.shuffle, self.epoch = len(data_source), check_flag(shuffle, "shuffle"), 0
         self.seed = _whole(seed, "seed", low=0, high=MAX_SEED)
 
     def set_epoch(self, epoch: int) -> None:

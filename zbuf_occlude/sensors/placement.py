@@ -211,7 +211,7 @@ class CropDistributions:
         show.  None (default): none.  :func:`~zbuf_occlude.sensors.fit.fit_width_profile` fits it.
     visible_across_sight : (lo, hi), optional
         Hide one side of the object behind an occluder that stands between it and the sensor
-        (:func:`side_occluders`): the share of the object's angular width, as the sensor sees it,
+        (:func:`~zbuf_occlude.sensors.scene.occluders.side_occluders`): the share of the object's angular width, as the sensor sees it,
         left visible, drawn per sample and capped at 1 (1 or more: nothing hidden); the hidden
         side, left or right, is drawn too.  A real street crop often shows part of an object, the
         rest behind a parked car, a wall or a tree, or cut off by the segmentation: a partial

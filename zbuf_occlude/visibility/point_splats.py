@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -68,8 +67,8 @@ from zbuf_occlude.defaults import (
     MAX_SPLAT_PIXELS,
     SPLAT_PIXELS_PER_RADIUS,
 )
-from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-from zbuf_occlude.geometry.arguments import check_camera, check_points, described
+from zbuf_occlude.errors import InvalidInputError
+from zbuf_occlude.geometry.arguments import check_camera, check_count, check_flag, check_nonnegative, check_points
 from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.io.point_sets import unit_normals
@@ -179,8 +178,7 @@ class PointSurfels:
 
     def __post_init__(self) -> None:
         for name in ("oriented", "estimated"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ArgumentTypeError(f"{name} must be True or False, got {described(getattr(self, name))}")
+            check_flag(getattr(self, name), name)
         if self.oriented and self.estimated:
             raise InvalidInputError("oriented and estimated exclude each other: estimated normals have no consistent sign")
         if self.sided is None:
@@ -244,7 +242,7 @@ class PointSurfels:
         from zbuf_occlude.visibility import point_kernels as kernels
 
         check_camera(camera)
-        tol = _check_nonnegative(tolerance, "tolerance")
+        tol = check_nonnegative(tolerance, "tolerance")
         splat_surfels = _splatter(backend)
         n = len(self.points)
         check_memory(
@@ -330,38 +328,6 @@ def splat_image(cam: NDArray[np.float64], radius: NDArray[np.float64], in_frustu
     return SplatImage(pix, x0, y0, math.ceil(extent_x / pix) + 1, math.ceil(extent_y / pix) + 1)
 
 
-def _shown(value: object) -> str:
-    """``repr(value)`` for a message; an integer too long for ``repr`` (over 4,300 digits) by its size."""
-    if isinstance(value, numbers.Integral) and abs(int(value)).bit_length() > 1024:
-        return f"an integer of about {int(abs(int(value)).bit_length() * math.log10(2)) + 1:,} digits"
-    return repr(value)
-
-
-def _number(value: object, name: str) -> float:
-    """``value`` as a float when it is a real number (not a bool, not text): else ArgumentTypeError."""
-    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
-        raise ArgumentTypeError(f"{name} must be a number, got {described(value)}")
-    try:
-        return float(value)
-    except OverflowError:  # an int too large for a float
-        return math.inf
-
-
-def _check_nonnegative(value: object, name: str, high: float = math.inf) -> float:
-    v = _number(value, name)
-    if not math.isfinite(v) or not 0 <= v <= high:
-        raise InvalidInputError(f"{name} must be finite and >= 0{f' and <= {high:g}' if high < math.inf else ''}, got {_shown(value)}")
-    return v
-
-
-def _check_count(value: object, name: str) -> int:
-    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
-        raise ArgumentTypeError(f"{name} must be an integer, got {described(value)}")
-    if not isinstance(value, numbers.Integral) or int(value) < 1:
-        raise InvalidInputError(f"{name} must be an integer >= 1, got {_shown(value)}")
-    return int(value)
-
-
 def _check_coordinates(points: NDArray[np.float64]) -> None:
     """Refuse a cloud with a coordinate beyond :data:`MAX_SPLAT_COORDINATE`, naming its row and value."""
     beyond = (np.abs(points) > MAX_SPLAT_COORDINATE).any(axis=1)
@@ -430,10 +396,9 @@ def point_surfels(
         available (naming the points), checked before any of it is allocated.
     """
     pts = check_points(points)
-    k = _check_count(neighbours, "neighbours")
-    scale = _check_nonnegative(splat_scale, "splat_scale", MAX_SPLAT_SCALE)
-    if not isinstance(oriented, (bool, np.bool_)):
-        raise ArgumentTypeError(f"oriented must be True or False, got {described(oriented)}")
+    k = check_count(neighbours, "neighbours")
+    scale = check_nonnegative(splat_scale, "splat_scale", MAX_SPLAT_SCALE)
+    check_flag(oriented, "oriented")
     if oriented and normals is None:
         raise InvalidInputError("oriented=True needs normals: estimated normals have no consistent sign")
     _check_coordinates(pts)

@@ -106,7 +106,7 @@ def fit_visible_across_sight(mesh, sensor, distributions, width_m: tuple[float, 
     ``n_samples`` crops of ``mesh`` drawn from ``distributions`` with nothing hidden are
     measured with :func:`across_sight_width` (median ``w``); where ``w`` is wider than the
     middle ``w̄`` of ``width_m``, the share ``v = w̄ / w`` is measured once more under a side
-    occluder (:func:`~zbuf_occlude.sensors.crops.side_occluders`) and corrected by that median.
+    occluder (:func:`~zbuf_occlude.sensors.scene.occluders.side_occluders`) and corrected by that median.
     The interval ``width_m · v / w̄`` then gives crops whose median width is about ``w̄`` where
     the mesh shows wider, and whole crops where the real scans are wider than the mesh's (the
     share is capped at 1 when drawn).  Fit it where real scans are narrow because they show
