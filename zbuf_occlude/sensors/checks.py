@@ -114,6 +114,13 @@ def _range_text(low: float | None, high: float | None, low_open: bool, high_open
     return f" {lo or hi}" if lo or hi else ""
 
 
+def _refused(name: str, expected: str, value: object, found: str | None = None) -> InvalidInputError:
+    """The one refusal of a checker: ``"{name} must be {expected}, got {found}"``, ``found`` what the checker saw (``a
+    number outside that range``), else the kind of value (:func:`value_kind`), never the value."""
+    found = found or value_kind(value)
+    return InvalidInputError(f"{name} must be {expected}, got {found}")
+
+
 def real(
     value: object, name: str, *, low: float | None = None, high: float | None = None, low_open: bool = False,
     high_open: bool = False, expected: str | None = None,
@@ -144,8 +151,7 @@ def real(
         ok = v < high if high_open else v <= high
     if not ok:
         expected = expected or "a finite number" + _range_text(low, high, low_open, high_open)
-        found = "a number outside that range" if math.isfinite(v) else value_kind(value)
-        raise InvalidInputError(f"{name} must be {expected}, got {found}")
+        raise _refused(name, expected, value, "a number outside that range" if math.isfinite(v) else None)
     return v
 
 
@@ -162,8 +168,8 @@ def count(value: object, name: str, *, low: int, high: int) -> int:
     finite = is_number(value) and math.isfinite(_as_float(value))
     whole = finite and float(value).is_integer()  # type: ignore[arg-type]
     if not (whole and low <= int(value) <= high):  # type: ignore[call-overload]
-        found = ("a whole number outside that range" if whole else "a number that is not whole") if finite else value_kind(value)
-        raise InvalidInputError(f"{name} must be an integer from {low} to {high}, got {found}")
+        found = ("a whole number outside that range" if whole else "a number that is not whole") if finite else None
+        raise _refused(name, f"an integer from {low} to {high}", value, found)
     return int(value)  # type: ignore[call-overload]
 
 
@@ -199,7 +205,7 @@ def reals(
                 expected = f"a list of {' or '.join(str(k) for k in sorted(lengths))} numbers"
             else:
                 expected = f"a list of 1 to {max_length:,} numbers" if max_length else "a list of one or more numbers"
-        raise InvalidInputError(f"{name} must be {expected}, got {value_kind(value)}")
+        raise _refused(name, expected, value)
     return tuple(real(v, f"{name}[{i}]", low=low, high=high, low_open=low_open, high_open=high_open) for i, v in enumerate(value))  # type: ignore[arg-type]
 
 
@@ -213,7 +219,7 @@ def mapping(value: object, name: str, allowed: Collection[str], *, required: Col
         allowed), or a missing one.
     """
     if not isinstance(value, Mapping):
-        raise InvalidInputError(f"{name} must be a mapping of {', '.join(allowed)}, got {value_kind(value)}")
+        raise _refused(name, f"a mapping of {', '.join(allowed)}", value)
     unknown = [k for k in value if k not in allowed]
     if unknown:
         first = sorted(unknown[:5], key=lambda k: (not isinstance(k, str), k if isinstance(k, str) else ""))
