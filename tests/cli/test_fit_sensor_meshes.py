@@ -12,10 +12,10 @@ import pytest
 import trimesh
 
 from zbuf_occlude.cli.main import main as cli_main
-from zbuf_occlude.experiments import partial_echo_crops as pc
-from zbuf_occlude.experiments import partial_echo_fit as pe
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.sensors.fit import mesh_crops as pc
+from zbuf_occlude.sensors.fit import partial_echo_meshes as pe
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.real_scans.datasets import LIDARNET_UNITS_PER_METRE
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 from zbuf_occlude.sensors.patterns.spinning import lidar_preset

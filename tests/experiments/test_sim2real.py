@@ -15,9 +15,9 @@ pytest.importorskip("torch")
 from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.experiments.sim2real.data import FITTED_PLACED, FITTED_SETS, TRAINING_SETS, SetRecipe, build_set, build_sets, mix_sets
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes, split_whole_meshes
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
-from zbuf_occlude.experiments.sim2real.placement import ClassPlacement, CropPlacement, MeshShape  # noqa: E402
+from zbuf_occlude.sensors.fit.class_placement import ClassPlacement, CropPlacement, MeshShape  # noqa: E402
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, parse_sizes, size_interval  # noqa: E402
 
 
@@ -245,7 +245,7 @@ def test_the_occluded_sets_elevations_default_to_those_the_sensor_sees_objects_f
     """Airborne: 90° minus the flight plan's incidence angles (nadir to half the swath); spinning:
     atan(height / distance) over the lidar set's mount; given: as given."""
     from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
-    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+    from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import airborne_preset
     from zbuf_occlude.sensors.kinds import sensor_to_json
 
@@ -287,7 +287,7 @@ def _sets_found(n: int = 4):
 def test_settings_hold_the_sensor_in_full_and_only_the_placement_its_kind_uses(tmp_path: Path) -> None:
     from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
     from zbuf_occlude.experiments.sim2real.run import _fix_settings
-    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+    from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import lidar_preset
     from zbuf_occlude.sensors.kinds import sensor_from_name, sensor_to_json, with_beam
 
@@ -650,7 +650,7 @@ def test_the_fitted_placed_set_draws_the_fitted_distances_and_the_others_the_pre
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from zbuf_occlude.experiments.sim2real.data import FITTED, FITTED_PLACED, build_sets
-    from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+    from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT
     from zbuf_occlude.sensors import crops, lidar_preset
 
     seen: list[tuple[str, tuple[float, float]]] = []
@@ -884,7 +884,7 @@ def test_a_validation_accuracy_tie_goes_to_the_lower_validation_loss() -> None:
 
 @pytest.mark.slow
 def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
+    from zbuf_occlude.sensors.fit.class_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]
@@ -917,7 +917,7 @@ def test_a_class_outline_warps_each_mesh_then_stretches_it_under_the_warp(tmp_pa
 
 @pytest.mark.slow
 def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
+    from zbuf_occlude.sensors.fit.class_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import lidar_preset
     from zbuf_occlude.sensors.fit import shapes
 
@@ -943,7 +943,7 @@ def test_width_scales_fitted_once_give_the_crops_of_fitting_them_in_every_draw(t
 @pytest.mark.slow
 def test_widen_is_never_narrower_whether_fitted_once_or_in_the_draw(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``across_sight_width_by: widen`` raises each stretch below 1 to 1, in fit_mesh_shapes and in a set's own fit alike."""
-    from zbuf_occlude.experiments.sim2real.placement import fit_mesh_shapes
+    from zbuf_occlude.sensors.fit.class_placement import fit_mesh_shapes
     from zbuf_occlude.sensors import crops, lidar_preset
 
     meshes = [m for m in find_class_meshes(_mesh_root(tmp_path)) if m.class_name == "pole"]

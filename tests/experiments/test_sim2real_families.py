@@ -83,7 +83,7 @@ def test_a_class_of_two_kinds_of_crops_takes_both_families_and_one_kind_the_one(
 
 def _entries(family: str, width: float, seed: int, objects: int) -> list:
     """Objects of ``family`` stretched by ``width`` as MeshEntry (the user's meshes of its class, for the fit)."""
-    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
     from zbuf_occlude.mesh.families.fitted import draw_object
     from zbuf_occlude.mesh.families.registry import FAMILIES
     from zbuf_occlude.mesh.load import normalize_mesh
@@ -110,7 +110,7 @@ def test_a_class_whose_meshes_come_nearer_the_real_crops_than_every_family_keeps
 
 def test_a_family_nearer_than_the_meshes_is_chosen_and_the_meshes_distance_recorded() -> None:
     """Tall boxes as the only meshes of the bush class are far from shrub crops; the shrubs are chosen."""
-    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
     from zbuf_occlude.mesh.load import normalize_mesh
 
     boxes = [MeshEntry(None, "bush", f"mine/box_{k}", normalize_mesh(trimesh.creation.box(extents=(0.5, 0.4 + 0.1 * k, 2.0))))

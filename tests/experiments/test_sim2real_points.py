@@ -16,7 +16,7 @@ from zbuf_occlude.cli.main import main  # noqa: E402
 from zbuf_occlude.errors import InvalidInputError  # noqa: E402
 from zbuf_occlude.experiments.sim2real import data as sim2real_data  # noqa: E402
 from zbuf_occlude.experiments.sim2real.data import OCCLUDED_POINTS, TRAINING_SETS, SetRecipe, build_set, build_sets
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
 
 NAMES = ["car", "pole"]
 RECIPE = SetRecipe(resolution=128, dense_points=1500)

@@ -17,7 +17,7 @@ from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.sim2real.config import Sim2RealConfig
 from zbuf_occlude.sensors.request import RETURNS_RANGE_RESOLUTION_M, kept_returns
 from zbuf_occlude.experiments.sim2real.data import SetRecipe, build_set
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
 from zbuf_occlude.sensors import lidar_preset
 from zbuf_occlude.sensors.beam.footprint import FOOTPRINT_RAYS
 

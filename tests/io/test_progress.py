@@ -164,7 +164,7 @@ def test_sim2real_shows_the_meshes_it_makes_a_set_from(monkeypatch, sample_meshe
     import shutil
 
     from zbuf_occlude.experiments.sim2real.data import build_set
-    from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+    from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
 
     for cls, names in {"seat": ("chair", "sofa"), "top": ("stool", "table")}.items():  # two meshes a class
         for name in names:

@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from zbuf_occlude.errors import MeshLoadError
-from zbuf_occlude.learn.data import balanced_epoch_rows, dedupe_meshes, mesh_content_key
+from zbuf_occlude.learn.data import balanced_epoch_rows
+from zbuf_occlude.mesh.inputs.duplicates import dedupe_meshes, mesh_content_key
 
 
 @settings(max_examples=60, deadline=None)

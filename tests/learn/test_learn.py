@@ -25,6 +25,7 @@ from zbuf_occlude.learn.models import (  # noqa: E402
     voxelize,
 )
 from zbuf_occlude.learn.training import RECIPES, TrainConfig, predict, train  # noqa: E402
+from zbuf_occlude.mesh.inputs.duplicates import dedupe_meshes  # noqa: E402
 
 SAMPLES = Path(__file__).resolve().parents[2] / "data" / "samples"
 
@@ -337,7 +338,7 @@ def test_dedupe_ignores_off_header_layout(tmp_path):
     (tmp_path / "a.off").write_text("OFF\n" + body)
     (tmp_path / "b.off").write_text("OFF" + body.replace("\n", "\r\n"))
     (tmp_path / "c.off").write_text("OFF\n" + body.replace("0 1 0", "0 2 0"))
-    kept, dropped = D.dedupe_meshes(sorted(tmp_path.glob("*.off")))
+    kept, dropped = dedupe_meshes(sorted(tmp_path.glob("*.off")))
     assert [p.name for p in kept] == ["a.off", "c.off"] and [(d.name, o.name) for d, o in dropped] == [("b.off", "a.off")]
 
 

@@ -1,7 +1,7 @@
 """``zbuf-occlude fit-sensor``: a sensor fitted to real object scans, or its return model to LAS/LAZ scans.
 
 Parses the options and calls :func:`zbuf_occlude.sensors.fit.engine.fit_sensor`, which reads, fits and writes; with
-``--meshes``, the fit of the partial echoes runs in it (:func:`zbuf_occlude.experiments.partial_echo_fit.partial_echo_refine`)."""
+``--meshes``, the fit of the partial echoes runs in it (:func:`zbuf_occlude.sensors.fit.partial_echo_meshes.partial_echo_refine`)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def _altitude(text: str, option: str) -> float:
 
 
 def _refine(args: argparse.Namespace, say):
-    """``--meshes`` and its options: the partial echoes' fit (:func:`~zbuf_occlude.experiments.partial_echo_fit.partial_echo_refine`),
+    """``--meshes`` and its options: the partial echoes' fit (:func:`~zbuf_occlude.sensors.fit.partial_echo_meshes.partial_echo_refine`),
     checked before any scan is read; None without ``--meshes`` (its options then refused, naming them)."""
     if args.meshes is None:
         given = [flag for flag, value in (("--crops-per-mesh", args.crops_per_mesh), ("--up-map", args.up_map), ("--sizes", args.sizes),
@@ -50,7 +50,7 @@ def _refine(args: argparse.Namespace, say):
             raise InvalidInputError(f"{', '.join(given)}: for the partial echoes' fit, which --meshes FOLDER asks for")
         return None
     from zbuf_occlude.cli.sim2real import parse_up_map
-    from zbuf_occlude.experiments.partial_echo_fit import partial_echo_refine
+    from zbuf_occlude.sensors.fit.partial_echo_meshes import partial_echo_refine
     from zbuf_occlude.mesh.sizes import parse_sizes
 
     up_map = parse_up_map(args.up_map)

@@ -147,7 +147,7 @@ def print_table(out: str, summary: dict[str, Any]) -> int:
 def add_sim2real_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``sim2real`` to ``experiment``'s argparse subparsers."""
     from zbuf_occlude.experiments.sim2real import SIM2REAL_RECIPE, VALIDATION_CHOICES
-    from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
+    from zbuf_occlude.sensors.fit.class_placement import MIN_RETURNS
     from zbuf_occlude.mesh.scene import UP_CHOICES
 
     p = sub.add_parser(

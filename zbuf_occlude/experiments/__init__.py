@@ -4,7 +4,5 @@
 (agreement with the oracle vs elevation), :mod:`.table3` (classifiers vs elevation and
 augmentation, Table 3; :mod:`.paper` holds the paper's numbers), :mod:`.sim2real` (trained on
 meshes, tested on real scans), :mod:`.realism` (simulated scans against real ones),
-:mod:`.contact_sheet` (a picture of a few samples per class of a data set or a folder of scans),
-:mod:`.partial_echo_fit` (a LiDAR's detection of partial echoes fitted by scanning meshes; the crops it compares in
-:mod:`.partial_echo_crops`).
+:mod:`.contact_sheet` (a picture of a few samples per class of a data set or a folder of scans).
 """

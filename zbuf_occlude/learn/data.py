@@ -9,21 +9,16 @@ centre at 0, maximum extent 1, z up; :func:`zbuf_occlude.real_scans.datasets.nor
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import os
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.errors import InvalidInputError, MeshLoadError
-from zbuf_occlude.io.caps import MAX_MESH_FILE_BYTES
-from zbuf_occlude.io.regular_files import read_regular_file
+from zbuf_occlude.errors import InvalidInputError
 
 __all__ = [
     "CloudSet",
@@ -32,8 +27,6 @@ __all__ = [
     "from_occluded",
     "from_meshes",
     "augment",
-    "mesh_content_key",
-    "dedupe_meshes",
     "split_validation",
     "balanced_epoch_rows",
 ]
@@ -236,52 +229,6 @@ def _partial(points: NDArray[np.float32], rng: np.random.Generator) -> NDArray[n
         filled = np.concatenate([kept, kept[rng.integers(0, len(kept), n - len(kept))]])
         out[i] = normalize_batch(points[i, filled][None])[0]
     return out
-
-
-def mesh_content_key(path: str | os.PathLike) -> str:
-    """Hash of a mesh file's content that ignores the OFF header's layout.
-
-    ModelNet40's ``OFF3514 3546 0`` and ModelNet10's ``OFF\\n3514 3546 0`` copies of the
-    same mesh (and CRLF/LF variants) get the same key; other formats hash their bytes.
-
-    Raises
-    ------
-    MeshLoadError
-        The file is missing, not a regular file (a FIFO would block), or larger than
-        :data:`~zbuf_occlude.io.caps.MAX_MESH_FILE_BYTES` (2 GiB); the message names it.
-    """
-    raw = read_regular_file(path, max_bytes=MAX_MESH_FILE_BYTES, error=MeshLoadError)
-    if Path(path).suffix.lower() == ".off":
-        text = raw.decode("latin-1")
-        text = re.sub(r"^\s*OFF", "", text, count=1)
-        return hashlib.sha256(" ".join(text.split()).encode()).hexdigest()
-    return hashlib.sha256(raw).hexdigest()
-
-
-def dedupe_meshes(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list[tuple[Path, Path]]]:
-    """Drop meshes whose content duplicates an earlier one (:func:`mesh_content_key`).
-
-    Returns
-    -------
-    kept : list of Path
-        In input order.
-    dropped : list of (duplicate, kept original)
-
-    Raises
-    ------
-    MeshLoadError
-        A file that cannot be read, as :func:`mesh_content_key` says.
-    """
-    seen: dict[str, Path] = {}
-    kept, dropped = [], []
-    for p in map(Path, paths):
-        key = mesh_content_key(p)
-        if key in seen:
-            dropped.append((p, seen[key]))
-        else:
-            seen[key] = p
-            kept.append(p)
-    return kept, dropped
 
 
 def split_validation(n: int, fraction: float, seed: int, groups: NDArray[np.integer] | None = None,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Container, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -9,7 +10,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 
-__all__ = ["RealScan", "normalize_points"]
+__all__ = ["RealScan", "normalize_points", "real_label"]
 
 
 @dataclass
@@ -72,3 +73,11 @@ def normalize_points(points: NDArray[np.floating], *, what: str = "") -> NDArray
     if extent == 0.0:
         raise InvalidInputError(f"{said}all {len(p):,} points coincide (zero extent); a scan needs an extent to be normalised")
     return ((p - (lo + hi) / 2.0) / extent).astype(np.float32)
+
+
+def real_label(label: str, names: Container[str], label_map: Mapping[str, str] | None = None) -> str:
+    """A real scan's class among ``names``: its label (renamed by ``label_map``), or that in lower case where the label
+    itself is none of them (LiDARNet's ``Car`` folders hold ``car``).  A label that is no class either way comes back in
+    lower case."""
+    label = (label_map or {}).get(label, label)
+    return label if label in names else label.lower()

@@ -388,8 +388,13 @@ class ObjectPlacement:
     occlude: bool = False
     names: Mapping[str, str] = field(default_factory=dict)
 
+    def name_of(self, field: str) -> str:
+        """How the caller calls ``field`` in a message: its option in :attr:`names` (``--max-returns``), else the field's
+        own name (:func:`~zbuf_occlude.sensors.checks.namer`)."""
+        return namer(self.names)(field)
+
     def __post_init__(self) -> None:
-        n = namer(self.names)
+        n = self.name_of
         if self.size_of not in DIMENSIONS:
             raise InvalidInputError(f"{n('size_of')} must be one of {', '.join(DIMENSIONS)}, got {self.size_of!r:.40}")
         if self.size_of != "max" and self.distributions.extents_m is not None:

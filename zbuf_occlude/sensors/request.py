@@ -264,8 +264,13 @@ class ScanRequest:
     kind: SensorKind = field(init=False, repr=False, compare=False)
     cast: str = field(init=False, compare=False)
 
+    def name_of(self, field: str) -> str:
+        """How the caller calls ``field`` in a message: its option in :attr:`names` (``--max-returns``), else the field's
+        own name (:func:`~zbuf_occlude.sensors.checks.namer`)."""
+        return namer(self.names)(field)
+
     def __post_init__(self) -> None:
-        n = namer(self.names)
+        n = self.name_of
         if isinstance(self.sensor, (str, os.PathLike)):
             object.__setattr__(self, "sensor", sensor_from_name(self.sensor))
         if isinstance(self.trajectory, (str, os.PathLike)):
@@ -316,7 +321,7 @@ class ScanRequest:
 
     def _check_values(self) -> None:
         """The backend, the formats and the sweeps, each alone."""
-        n = namer(self.names)
+        n = self.name_of
         if not isinstance(self.backend, str) or self.backend not in BACKENDS:
             raise InvalidInputError(f"{n('backend')} must be one of {', '.join(BACKENDS)}, got {self.backend!r:.40}")
         unknown = [f for f in self.formats if f not in SCAN_FORMATS] if isinstance(self.formats, tuple) else [self.formats]
@@ -326,7 +331,7 @@ class ScanRequest:
 
     def _check_optics(self, kind, label) -> None:
         """The surface optics against the sensor and the cast (class docstring)."""
-        n, tau = namer(self.names), self.transmittance
+        n, tau = self.name_of, self.transmittance
         shown = f"{n('transmittance')} {_shown_tau(tau)}"
         asked = [f for f, v in ((n("reflectance_table"), self.reflectance_table), (shown, tau is not None)) if v]
         opaque = tau is None or (not isinstance(tau, (str, Mapping)) and tau == 0) or (isinstance(tau, Mapping) and not any(tau.values()))
@@ -351,7 +356,7 @@ class ScanRequest:
 
     def _frame(self, kind, label) -> str:
         """The frame: as asked, else "sensor", or "world" for a scanner that flies (which refuses "sensor")."""
-        n = namer(self.names)
+        n = self.name_of
         if self.frame is not None and self.frame not in FRAMES:
             raise InvalidInputError(f"{n('frame')} must be one of {', '.join(FRAMES)}, got {self.frame!r:.40}")
         if not kind.flies:
@@ -365,7 +370,7 @@ class ScanRequest:
         """A trajectory against the sensor, the sweeps and the output (class docstring)."""
         if self.trajectory is None:
             return
-        n, traj = namer(self.names), self.trajectory
+        n, traj = self.name_of, self.trajectory
         what = n("trajectory")
         if not kind.pulsed or kind.flies:
             raise InvalidInputError(f"{what}: a {kind.title} {'flies its own plan' if kind.flies else 'takes one pose'}")
@@ -402,7 +407,7 @@ class ScanRequest:
             try:
                 out["transmittance"] = per_class(scene.build(), dict(tau))
             except InvalidInputError as exc:
-                raise InvalidInputError(f"{namer(self.names)('transmittance')} {_shown_tau(tau)}: {exc}") from None
+                raise InvalidInputError(f"{self.name_of('transmittance')} {_shown_tau(tau)}: {exc}") from None
         elif isinstance(tau, str):
             out["transmittance"] = tau
         elif tau is not None:  # every object, not the ground

@@ -18,7 +18,6 @@ import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.spec_files import SCENE_SUFFIXES
-from zbuf_occlude.sensors.checks import namer
 from zbuf_occlude.sensors.placement import ObjectPlacement, check_outside
 from zbuf_occlude.sensors.request import LAS_FORMATS, ScanRequest
 from zbuf_occlude.sensors.scan_data import GPS_START_S, check_gps_start
@@ -73,7 +72,7 @@ def save_scan(folder, scan, stem: str, request: ScanRequest, *, ground_z_m: floa
     files = []
     start = request.las.get("gps_start_s", GPS_START_S)  # to_las_bytes' default where the request gives none
     if set(request.formats) & set(LAS_FORMATS):
-        check_gps_start(start, scan.gps_time, name=request.names.get("gps_start_s") or "gps_start_s")
+        check_gps_start(start, scan.gps_time, name=request.name_of("gps_start_s"))
     for fmt in request.formats:
         if fmt in LAS_FORMATS:  # encoded in memory
             data = scan.to_las_bytes(compress=fmt == "laz", ground_z_m=ground_z_m, scan_number=number % 65536, **request.las)
@@ -190,7 +189,7 @@ def run_scan(request: ScanRequest, source: str | os.PathLike, out: str | os.Path
     """
     from zbuf_occlude.io.owned import OwnedFolder
 
-    src, n = Path(source), namer(request.names)
+    src, n = Path(source), request.name_of
     scene_file = src.suffix.lower() in SCENE_SUFFIXES
     if request.trajectory is not None and not scene_file:
         raise InvalidInputError(f"{n('trajectory')} moves the sensor through a scene file's frame; "
@@ -228,7 +227,7 @@ def placed_object(source: str | os.PathLike, placement: ObjectPlacement, request
         flat in z (:data:`FLAT_SHARE`), a size of a primitive's length or height, what the fit refuses, a distance that
         may put a sensor that does not fly inside the object (:func:`~zbuf_occlude.sensors.placement.check_outside`).
     """
-    n, src = namer(placement.names), Path(source)
+    n, src = placement.name_of, Path(source)
     mesh = PRIMITIVES.get(str(src)) if not src.exists() else None
     if mesh is None:
         from zbuf_occlude.mesh.load import load_mesh

@@ -21,9 +21,9 @@ import time
 
 import numpy as np
 
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+from zbuf_occlude.sensors.fit.class_placement import MIN_RETURNS
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT
 from zbuf_occlude.mesh.sizes import parse_sizes, size_interval
 from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.placement import CropDistributions

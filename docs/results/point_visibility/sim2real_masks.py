@@ -13,7 +13,7 @@ import json
 import numpy as np
 from zbuf_occlude import pipeline
 from zbuf_occlude.experiments.sim2real.data import OCCLUDED_POINTS, SetRecipe, build_set
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes, split_whole_meshes
 
 seed = int(sys.argv[1]) if len(sys.argv) > 1 else 0
 meshes = find_class_meshes("../shared/data/street_objects", up_map={"bush/openglforest__*": "+y"})

@@ -36,7 +36,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, per_crop, sim_crops  # noqa: E402
 
 from zbuf_occlude.sensors.request import kept_returns  # noqa: E402
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_csv, write_text  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
 from zbuf_occlude.sensors.kinds import sensor_from_name  # noqa: E402

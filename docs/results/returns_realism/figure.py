@@ -46,7 +46,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import fit_half_scans, sim_crops  # noqa: E402
 
 from zbuf_occlude.sensors.request import kept_returns  # noqa: E402
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_bytes, write_text  # noqa: E402
 from zbuf_occlude.io.encodings import png_bytes  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402

@@ -9,15 +9,15 @@ fits to) is used here; the scored half is not read beyond the split.  On the fit
 
 1. the HDL-32E preset is fitted as ``experiment sim2real --fit-sensor`` fits it
    (``sensor_fit.fit_to_scans``: firing rate, range noise, dropout and its growth with range);
-2. the ``lidar`` set's crops of every mesh (``partial_echo_crops.mesh_crops``: sim2real's placements and rule)
+2. the ``lidar`` set's crops of every mesh (``sensors.fit.mesh_crops.mesh_crops``: sim2real's placements and rule)
    are scanned by the fitted sensor with a 7-sub-ray footprint over the data sheet's 0.16°
    divergence and Velodyne's strongest-return mode (the mode the real set was recorded in: its
-   points share no direction with another point; ``partial_echo_fit.partial_echo_sensor``), at each
+   points share no direction with another point; ``sensors.fit.partial_echo_meshes.partial_echo_sensor``), at each
    threshold of ``fit.partial_echoes.FIT_GRID``;
 3. ``fit_min_echo_reflectance`` matches the median outline share per class (``realism.outline_share``)
    of the crops whose centroid lies 5-10 m away, simulated against real.
 
-Steps 2 and 3 are the fit ``fit-sensor --meshes`` runs (``partial_echo_fit.fit_partial_echoes_to_meshes``).
+Steps 2 and 3 are the fit ``fit-sensor --meshes`` runs (``sensors.fit.partial_echo_meshes.fit_partial_echoes_to_meshes``).
 
 Then, at the fitted threshold (to 0.05), the footprint's convergence: the same crops at K = 7
 and K = 28 (4×), paired, per class: median points and outline share.  Writes ``fit.md``,
@@ -40,10 +40,10 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, per_crop, sim_crops  # noqa: E402
 
-from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
-from zbuf_occlude.experiments.partial_echo_fit import fit_partial_echoes_to_meshes, partial_echo_sensor  # noqa: E402
+from zbuf_occlude.sensors.fit.mesh_crops import MATCHED_RANGE_M  # noqa: E402
+from zbuf_occlude.sensors.fit.partial_echo_meshes import fit_partial_echoes_to_meshes, partial_echo_sensor  # noqa: E402
 from zbuf_occlude.experiments.sensor_fit import fit_to_scans  # noqa: E402
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes  # noqa: E402
 from zbuf_occlude.experiments.sim2real.real import real_halves, real_scan_rows  # noqa: E402
 from zbuf_occlude.experiments.sim2real.run import _REAL_SPLIT_SEED  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402

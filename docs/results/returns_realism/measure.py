@@ -4,7 +4,7 @@
         ../shared/data/lidarnet_v2_partial --out docs/results/returns_realism --up-map 'bush/openglforest__*=+y'
 
 For each scanner variant of :data:`VARIANTS` (a name and a function of the HDL-32E preset), the
-``lidar`` set's crops of every mesh (:func:`zbuf_occlude.experiments.partial_echo_crops.mesh_crops`, which
+``lidar`` set's crops of every mesh (:func:`zbuf_occlude.sensors.fit.mesh_crops.mesh_crops`, which
 ``fit-sensor --meshes`` scans with too; ``experiment sim2real``'s code path: its mesh reader and
 ``--up-map`` rule, :func:`find_class_meshes`; its placements, :meth:`CropPlacement.crop_distributions`
 over ``LIDAR_PLACEMENT`` and the class's real size from ``CLASS_SIZES_M``; its crops,
@@ -42,12 +42,12 @@ from dataclasses import fields
 
 import numpy as np
 
-from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, mesh_crops
-from zbuf_occlude.experiments.partial_echo_fit import partial_echo_sensor
+from zbuf_occlude.sensors.fit.mesh_crops import MATCHED_RANGE_M, mesh_crops
+from zbuf_occlude.sensors.fit.partial_echo_meshes import partial_echo_sensor
 from zbuf_occlude.experiments.realism import RANGE_BINS_M, ObjectCloud, class_summary, outline_mask, range_bin_medians, scan_line_runs
 from zbuf_occlude.sensors.request import kept_returns
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.io.atomic import write_csv, write_text
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M
 from zbuf_occlude.real_scans.datasets import load_real_scans

@@ -8,7 +8,7 @@ read (the scored half is not read beyond the split).  The measure is ``fit-senso
 (:func:`~zbuf_occlude.sensors.fit.fit_lidar`: firings missing in gaps of at most 4 azimuth steps
 along a ring's run over the object, pooled over scans, bootstrap over scans), per class, on the
 real scans and on the ``lidar`` set's crops of the street_objects meshes
-(:func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`, sim2real's placements) scanned
+(:func:`~zbuf_occlude.sensors.fit.mesh_crops.mesh_crops`, sim2real's placements) scanned
 with the sensor file of the returns runs (``--sensor``: a 7-ray footprint, the strongest echo).
 
 The fit (:func:`~zbuf_occlude.sensors.fit.fit_foliage_dropout`): the real bushes keep
@@ -23,7 +23,7 @@ written beside the real scans' (``ray_drop.md``), with the sensor file (``hdl32e
 
 Where the scan lines of those clouds break (``break_depths.md``): per class at 5–10 m, the breaks
 of a scan and their depths, the range step across each
-(:func:`~zbuf_occlude.experiments.realism_stats.break_depths_m`).  A break at an outline is deep;
+(:func:`~zbuf_occlude.sensors.fit.scan_lines.break_depths_m`).  A break at an outline is deep;
 a missed pulse on a surface leaves a shallow one.
 """
 
@@ -41,9 +41,9 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from measure import CLASSES, fit_half_scans, per_crop, sim_crops  # noqa: E402
 
-from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M  # noqa: E402
+from zbuf_occlude.sensors.fit.mesh_crops import MATCHED_RANGE_M  # noqa: E402
 from zbuf_occlude.experiments.realism_stats import break_depths_m  # noqa: E402
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes  # noqa: E402
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes  # noqa: E402
 from zbuf_occlude.io.atomic import write_text  # noqa: E402
 from zbuf_occlude.sensors import Lidar  # noqa: E402
 from zbuf_occlude.sensors.fit import Estimate, dropout_by_surface, fit_foliage_dropout, fit_lidar, is_crown_class  # noqa: E402

@@ -10,8 +10,8 @@ import numpy as np
 
 from zbuf_occlude.experiments.sim2real import run as S
 from zbuf_occlude.experiments.sim2real.data import check_lidar_meshes
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT, CropPlacement
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT, CropPlacement
 from zbuf_occlude.experiments.sim2real.real import real_clouds, real_scan_rows
 from zbuf_occlude.mesh.sizes import size_interval
 from zbuf_occlude.real_scans.datasets import load_real_scans

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from fit_half import load_fit_half
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement, fit_mesh_shapes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement, fit_mesh_shapes
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import draw_placement
 from zbuf_occlude.sensors.fit import across_sight_width, width_profile

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from zbuf_occlude.experiments.sim2real.data import TRAINING_SETS, SetRecipe, build_sets
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
 from zbuf_occlude.experiments.sim2real.real import real_clouds
 from zbuf_occlude.experiments.sim2real.report import plot_examples
 from zbuf_occlude.real_scans.datasets import load_real_scans

@@ -17,13 +17,12 @@ from typing import TYPE_CHECKING, Any
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.sim2real.data import (
     FITTED_SETS,
-    MIN_RETURNS,
     OCCLUDED_POINTS,
     POINT_VISIBILITY,
     TRAINING_SETS,
     sensor_elevation_deg,
 )
-from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT
+from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT, MIN_RETURNS
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam.adaptive_cast import footprint_mode
@@ -45,7 +44,7 @@ VALIDATION_CHOICES = ("meshes", "fit-half")
 FITTED_SHAPES = {"widths": "across_sight_width_m", "widen": "across_sight_width_m", "occlude": "across_sight_width_m",
                  "outline": "across_sight_profile"}  # fmt: skip
 #: The shapes that meet the widths, of which a run takes one, and how each meets them
-#: (:data:`~zbuf_occlude.experiments.sim2real.placement.WIDTH_BY`).
+#: (:data:`~zbuf_occlude.sensors.fit.class_placement.WIDTH_BY`).
 WIDTH_SHAPES = {"widths": "stretch", "widen": "widen", "occlude": "occluder"}
 #: Family objects added per class with ``fit_families`` when ``family_count`` is not given.
 FAMILY_COUNT = 8
@@ -107,13 +106,13 @@ class Sim2RealConfig:
         augmentation off, random yaw drawn once per cloud) instead of the paper's normalisation.
     label_map : mapping, optional
         Real label → class folder name (labels equal to a class up to case need none).
-    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`).
+    up, up_map : mesh up axis and per-file overrides (:func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`).
     sizes : mapping of str to SizeRange, optional
         Real sizes per class (default :data:`zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
     real_options : mapping, optional
         Keywords of :func:`~zbuf_occlude.real_scans.datasets.load_real_scans`.
     min_returns : int
-        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS`).
+        LiDAR crops with fewer returns are redrawn (:data:`~zbuf_occlude.sensors.fit.class_placement.MIN_RETURNS`).
         Before any set is made, every mesh is tried once with the sensor; one that gives no
         such crop is skipped with a warning naming it (``settings.json``: ``meshes_skipped``).
     method : str
@@ -154,7 +153,7 @@ class Sim2RealConfig:
         the widths show where its crops are wider (a partial view; nothing hidden where they are
         narrower); ``"outline"``, a warp to its outline over the height, alone or with one of
         the three.  Empty (default): the meshes' own shapes.  Each is fitted per mesh once
-        (:func:`~zbuf_occlude.experiments.sim2real.placement.fit_mesh_shapes`).
+        (:func:`~zbuf_occlude.sensors.fit.class_placement.fit_mesh_shapes`).
     returns : int or str
         What the ``lidar`` set's scanner keeps of each pulse's returns
         (:func:`~zbuf_occlude.sensors.request.kept_returns`, the rule ``farm --sensor`` follows too):

@@ -45,8 +45,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, check_classes
-from zbuf_occlude.experiments.sim2real.placement import LIDAR_PLACEMENT, CropPlacement
+from zbuf_occlude.mesh.inputs.class_folders import MeshEntry, check_classes
+from zbuf_occlude.sensors.fit.class_placement import LIDAR_PLACEMENT, MIN_RETURNS, CropPlacement, crops_to_draw
 from zbuf_occlude.experiments.sim2real.real import KEEP_SCALE_UNIT_M
 from zbuf_occlude.learn.data import CloudSet, normalize_batch
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange, size_interval
@@ -55,7 +55,7 @@ if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
 
 __all__ = [
-    "TRAINING_SETS", "GROUND_ELEVATION_DEG", "MIN_RETURNS", "crops_to_draw", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS",
+    "TRAINING_SETS", "GROUND_ELEVATION_DEG", "FITTED", "FITTED_PLACED", "POOLED", "FITTED_SETS",
     "OCCLUDED_POINTS", "POINT_VISIBILITY", "SetRecipe", "sensor_elevation_deg", "check_lidar_meshes", "allocate", "build_set", "build_sets", "mix_sets",
 ]  # fmt: skip
 
@@ -87,9 +87,6 @@ FITTED_SETS = (FITTED, FITTED_PLACED, POOLED)
 #: from slightly below the horizon (kerbs, slopes) to about 30° above (a pedestrian or a bush a
 #: few metres from a roof-mounted sensor).
 GROUND_ELEVATION_DEG = (-5.0, 30.0)
-#: A crop with fewer returns is redrawn: a segmentation pipeline drops clusters this small, and
-#: a handful of points padded to ``n_points`` describes no shape (fixed before any real scan was scored).
-MIN_RETURNS = 30
 #: Rounds of crop draws per mesh before the crops found are repeated (logged).
 _LIDAR_TRIES = 6
 
@@ -196,7 +193,7 @@ class SetRecipe:
         a few points per m² needs a much lower value for small objects).
     placement : CropPlacement, optional
         Where the LiDAR crops are placed and the shape each mesh is given, per class and per
-        mesh (:mod:`~zbuf_occlude.experiments.sim2real.placement`); None: :data:`LIDAR_PLACEMENT`
+        mesh (:mod:`~zbuf_occlude.sensors.fit.class_placement`); None: :data:`LIDAR_PLACEMENT`
         for every class, the meshes' own shapes.
     dense_points, resolution : int
         The ``occluded`` set's dense surface sample per mesh and its z-buffer's resolution, pixels.
@@ -266,11 +263,6 @@ def _occluded(entry: MeshEntry, k: int, n_points: int, seed: int, rng: np.random
     if len(out) < k:
         raise InvalidInputError(f"{entry.path}: only {len(out)} of {k} poses see any point")
     return out
-
-
-def crops_to_draw(want: int) -> int:
-    """Crops drawn in a first round to keep ``want`` with enough returns: a fifth more, at least one (some miss the object)."""
-    return want + max(1, want // 5)
 
 
 def _lidar(entry: MeshEntry, k: int, n_points: int, seed: int, sensor, size: SizeRange, min_returns: int = MIN_RETURNS,

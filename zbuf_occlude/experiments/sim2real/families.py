@@ -5,7 +5,7 @@
 normalised: its proportions and how its points spread over its height
 (:func:`~zbuf_occlude.experiments.realism_stats.shape_stats`, heading-free).  For each such family it
 draws ``objects`` objects, scans ``crops`` crops of each as the ``lidar`` training set does (the
-sensor, :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size range),
+sensor, :data:`~zbuf_occlude.sensors.fit.class_placement.LIDAR_PLACEMENT`, the class's size range),
 and fits the family's horizontal stretch (:func:`~zbuf_occlude.mesh.families.fitted.widen`, a factor
 drawn in ``[lo, hi]``) to the crops' height / width, in log space: starting from no stretch, each of
 ``iterations`` updates moves the range's centre by ``log(m_sim / m_real)`` (the medians; height /
@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.experiments.realism_stats import HEIGHT_BINS, profile_distance, shape_stats
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.sensors.fit.class_placement import MIN_RETURNS, CropPlacement
 from zbuf_occlude.mesh.families.fitted import (
     FAMILIES_FIT_FORMAT,
     MAX_WIDTH_SCALE,
@@ -60,8 +60,6 @@ log = logging.getLogger(__name__)
 FIT_QUANTILES = (10.0, 50.0, 90.0)
 #: Fewest real crops of a class, and fewest simulated crops of a family, a fit is made from.
 MIN_FIT_CROPS = 5
-#: Returns a simulated crop needs to count (the ``lidar`` set redraws crops with fewer).
-_MIN_RETURNS = 30
 
 
 def families_of(class_name: str) -> list[str]:
@@ -148,8 +146,8 @@ def _distance(sim: dict, real: dict) -> float:
 
 def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: int) -> list[NDArray[np.float64]]:
     """``crops`` crops of each of ``entries`` (MeshEntry: normalised, z up), scanned as the ``lidar`` set scans them
-    (:data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT`, the class's size): those of
-    ``_MIN_RETURNS`` returns or more, each's distinct points."""
+    (:data:`~zbuf_occlude.sensors.fit.class_placement.LIDAR_PLACEMENT`, the class's size): those of
+    ``MIN_RETURNS`` returns or more, each's distinct points."""
     from zbuf_occlude.sensors.crops import lidar_object_samples
 
     placement, clouds = CropPlacement(), []
@@ -157,7 +155,7 @@ def _scanned(entries: Sequence, size: SizeRange, sensor, *, crops: int, seed: in
         dist, _ = placement.crop_distributions(entry, size)
         samples = lidar_object_samples(entry.mesh, sensor, name=entry.name, n_samples=crops, n_points=1024, seed=seed,
                                        distributions=dist, class_name=entry.class_name)  # fmt: skip
-        clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= _MIN_RETURNS]
+        clouds += [np.unique(c.points.astype(np.float64), axis=0) for c in samples if c.n_visible >= MIN_RETURNS]
     return clouds
 
 
@@ -170,7 +168,7 @@ def _simulated(family: str, size: SizeRange, sensor, width_scale: tuple[float, f
                seed: int) -> list[NDArray[np.float64]]:  # fmt: skip
     """``crops`` crops each of ``objects`` objects of ``family`` stretched in ``width_scale``, scanned as the ``lidar``
     set scans (:func:`_scanned`; the same objects and placements for every ``width_scale``)."""
-    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
     from zbuf_occlude.mesh.load import normalize_mesh
 
     fam = FAMILIES[family]
@@ -311,7 +309,7 @@ def family_meshes(fit: FamiliesFit, per_class: int, seed: int) -> list:
     import tempfile
     from pathlib import Path
 
-    from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+    from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
     from zbuf_occlude.mesh.families.write import write_family
     from zbuf_occlude.mesh.load import load_mesh
 

@@ -9,29 +9,22 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Container, Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.learn.data import normalize_batch, resample
+from zbuf_occlude.real_scans.records import real_label
 
-__all__ = ["KEEP_SCALE_UNIT_M", "real_clouds", "real_label", "real_scan_rows", "scan_key", "real_halves"]
+__all__ = ["KEEP_SCALE_UNIT_M", "real_clouds", "real_scan_rows", "scan_key", "real_halves"]
 
 log = logging.getLogger(__name__)
 
 #: ``keep_scale``: clouds, real and made from meshes alike, are centred and divided by this many
 #: metres (a 10 m object spans ±0.5 ... 1).
 KEEP_SCALE_UNIT_M = 10.0
-
-
-def real_label(label: str, names: Container[str], label_map: Mapping[str, str] | None = None) -> str:
-    """A real scan's class among ``names``: its label (renamed by ``label_map``), or that in lower case where the label
-    itself is none of them (LiDARNet's ``Car`` folders hold ``car``).  A label that is no class either way comes back in
-    lower case."""
-    label = (label_map or {}).get(label, label)
-    return label if label in names else label.lower()
 
 
 def real_scan_rows(scans, names: list[str], label_map: dict[str, str]) -> list[int]:

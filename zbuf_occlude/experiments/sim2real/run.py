@@ -35,8 +35,8 @@ from zbuf_occlude.experiments.sim2real.outputs import (
     set_folder,
 )
 from zbuf_occlude.experiments.sim2real.families import family_heights, family_meshes, fit_families
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes, split_whole_meshes
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement, fit_mesh_shapes
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes, split_whole_meshes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement, fit_mesh_shapes
 from zbuf_occlude.experiments.sim2real.real import real_clouds, real_halves, real_scan_rows
 from zbuf_occlude.experiments.table3.common import CHECKPOINT_FILES
 from zbuf_occlude.io.json_files import read_json_file
@@ -119,7 +119,7 @@ class Sim2RealSets:
         ``half_a``, every row is scored on ``half_b``; with ``fit_sensor``, ``half_a`` is the fit half.
     fitted, fitted_placement, fitted_sizes, fit_json
         With ``fit_sensor``: the fitted Lidar, the crops' placement per class and shape per mesh
-        (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`), the heights
+        (:class:`~zbuf_occlude.sensors.fit.class_placement.CropPlacement`), the heights
         per class and the sensor's JSON; None otherwise.
     families_fit : FamiliesFit or None
         With ``fit_families``: the families fitted to the first half

@@ -21,7 +21,7 @@ from zbuf_occlude.experiments.table3.config import Table3Config
 from zbuf_occlude.io.owned import OwnedFolder
 from zbuf_occlude.io.regular_files import read_regular_file
 from zbuf_occlude.io.tables import read_csv_rows
-from zbuf_occlude.learn.data import dedupe_meshes
+from zbuf_occlude.mesh.inputs.duplicates import dedupe_meshes
 
 __all__ = [
     "CHECKPOINT_FILES", "AUGMENTATION_SETS", "ELEVATION_OUTPUTS", "AUGMENTATION_OUTPUTS", "COMBINED_OUTPUTS", "DATA_OUTPUTS",

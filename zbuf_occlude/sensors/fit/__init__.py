@@ -27,6 +27,11 @@
 ``fitted_beam``
     The return model applied to a scanner: its beam with what was fitted changed, the rest its
     data sheet's, and where each field came from (:func:`~zbuf_occlude.sensors.fit.fitted_beam.fitted_sensor`).
+``partial_echoes``, ``partial_echo_meshes``, ``mesh_crops``, ``class_placement``, ``scan_lines``
+    The receiver's partial echoes fitted by scanning a folder of meshes (``fit-sensor --meshes``,
+    :func:`~zbuf_occlude.sensors.fit.partial_echo_meshes.fit_partial_echoes`): the meshes' crops placed class by
+    class, as ``experiment sim2real``'s ``lidar`` set places them, and the outline share of their scan lines against
+    the real scans' (imported from their modules).
 ``engine``
     ``fit-sensor``'s one engine: reads the scans or LAS/LAZ files, fits, writes the sensor file
     and its table (:func:`zbuf_occlude.sensors.fit.engine.fit_sensor`; imported from its module,

@@ -19,7 +19,7 @@ What the input is chooses the fit (:func:`fit_sensor`):
 
   A spinning LiDAR's fit may be followed by a :class:`Refine` step, run on the same scans before
   anything is written, whose sensor is written instead (``fit-sensor --meshes``: the detection of
-  partial echoes, fitted by :mod:`zbuf_occlude.experiments.partial_echo_fit`, which this package
+  partial echoes, fitted by :mod:`zbuf_occlude.sensors.fit.partial_echo_meshes`, which this package
   does not import).
 
 Writes the sensor JSON (which ``scan``, ``farm --sensor`` and ``experiment sim2real --sensor``

@@ -15,7 +15,7 @@ import numpy as np
 from zbuf_occlude.cli.main import build_parser
 from zbuf_occlude.cli.sim2real import sim2real_config
 from zbuf_occlude.experiments.sim2real import run as sim2real_run
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.sensors.crops import object_crops
 from zbuf_occlude.sensors.request import kept_returns
 

@@ -17,8 +17,8 @@ import sys
 
 import numpy as np
 
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M
 from zbuf_occlude.sensors.crops import lidar_object_samples
 from zbuf_occlude.sensors.kinds import sensor_from_name

@@ -1,18 +1,18 @@
 """The crops a partial-echo fit compares: meshes scanned as ``experiment sim2real``'s ``lidar`` set, and the outline share
 of each crop and each real scan whose centroid lies :data:`MATCHED_RANGE_M` away.
 
-The fit itself, the beam it scans with and its result are in :mod:`zbuf_occlude.experiments.partial_echo_fit`.
+The fit itself, the beam it scans with and its result are in :mod:`zbuf_occlude.sensors.fit.partial_echo_meshes`.
 
 How the meshes are scanned is ``experiment sim2real``'s ``lidar`` set (:func:`mesh_crops`): its
-mesh folders (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`), its
-placements (:class:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement`, sensor 5-25 m
+mesh folders (:func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`), its
+placements (:class:`~zbuf_occlude.sensors.fit.class_placement.CropPlacement`, sensor 5-25 m
 away; each class's real size from :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`) and its rule
-(a crop of fewer than :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns is
+(a crop of fewer than :data:`~zbuf_occlude.sensors.fit.class_placement.MIN_RETURNS` returns is
 dropped).  Crop ``k`` of a mesh has the same placement at every threshold, so the thresholds are
 compared on the same crops; a crop lost at some threshold (too few returns left) leaves every
 threshold's row (:func:`simulated_shares`).  Only scans whose centroid lies :data:`MATCHED_RANGE_M`
 away count, real and simulated: the outline share
-(:func:`~zbuf_occlude.experiments.realism_stats.outline_share`) changes with range, and most real
+(:func:`~zbuf_occlude.sensors.fit.scan_lines.outline_share`) changes with range, and most real
 scans of every class lie there.
 """
 
@@ -28,11 +28,11 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.realism_stats import outline_share
-from zbuf_occlude.experiments.sim2real.data import MIN_RETURNS, crops_to_draw
-from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
-from zbuf_occlude.experiments.sim2real.real import real_label
+from zbuf_occlude.sensors.fit.scan_lines import outline_share
+from zbuf_occlude.sensors.fit.class_placement import MIN_RETURNS, crops_to_draw
+from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
+from zbuf_occlude.real_scans.records import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.checks import count
 from zbuf_occlude.sensors.kinds import with_beam
@@ -61,7 +61,7 @@ class MeshCrop:
     Attributes
     ----------
     mesh : str
-        The mesh's name (:attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`, ``car/sedan``).
+        The mesh's name (:attr:`~zbuf_occlude.mesh.inputs.class_folders.MeshEntry.name`, ``car/sedan``).
     class_name : str
     crop : int
         The crop's index ``k`` among the mesh's draws: its placement is the same for every sensor.
@@ -96,10 +96,10 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
                sizes: Mapping[str, SizeRange] = CLASS_SIZES_M, footprint: str = "auto") -> list[MeshCrop]:  # fmt: skip
     """``experiment sim2real``'s ``lidar`` crops of every mesh, scanned by ``sensor``: up to ``crops_per_mesh`` each.
 
-    Per mesh, :func:`~zbuf_occlude.experiments.sim2real.data.crops_to_draw` placements are drawn
+    Per mesh, :func:`~zbuf_occlude.sensors.fit.class_placement.crops_to_draw` placements are drawn
     (:func:`~zbuf_occlude.sensors.crops.object_crops` with the mesh's name and ``seed``, from
     ``placement``'s distributions and the class's size in ``sizes``); crops with fewer than
-    :data:`~zbuf_occlude.experiments.sim2real.data.MIN_RETURNS` returns of the object are dropped and
+    :data:`~zbuf_occlude.sensors.fit.class_placement.MIN_RETURNS` returns of the object are dropped and
     the first ``crops_per_mesh`` kept (a mesh with fewer is logged).  Crop ``k`` of a mesh is placed
     by the same draw whatever the sensor, so crops of two sensors with the same ``(mesh, crop)`` are
     paired.  Unlike sim2real, a mesh short of good crops is not drawn again under another name.
@@ -107,13 +107,13 @@ def mesh_crops(meshes: Sequence[MeshEntry], sensor: Lidar, crops_per_mesh: int, 
     Parameters
     ----------
     meshes : sequence of MeshEntry
-        Loaded meshes with their class (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`).
+        Loaded meshes with their class (:func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`).
     sensor : Lidar
     crops_per_mesh : int
         1 to :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
     seed : int
     placement : CropPlacement, optional
-        Default ``CropPlacement()``: :data:`~zbuf_occlude.experiments.sim2real.placement.LIDAR_PLACEMENT` for every class.
+        Default ``CropPlacement()``: :data:`~zbuf_occlude.sensors.fit.class_placement.LIDAR_PLACEMENT` for every class.
     sizes : mapping of class name to SizeRange
         The real size of each mesh's class (default :data:`~zbuf_occlude.mesh.sizes.CLASS_SIZES_M`).
     footprint : {"auto", "exact", "adaptive"}
@@ -173,7 +173,7 @@ def real_shares(scans: Sequence[RealScan], classes: Sequence[str]) -> dict[str, 
     ----------
     scans : sequence of RealScan
         Real object scans with ``label`` and ``points_sensor_m`` ((N, 3) float64, sensor at the origin, z up, metres);
-        a scan whose label is no class of ``classes`` (:func:`~zbuf_occlude.experiments.sim2real.real.real_label`) is
+        a scan whose label is no class of ``classes`` (:func:`~zbuf_occlude.real_scans.records.real_label`) is
         passed over.
     classes : sequence of str
 

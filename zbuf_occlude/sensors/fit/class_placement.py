@@ -1,4 +1,5 @@
-"""Where the sim-to-real experiment's LiDAR crops are placed, and the shape each mesh is given: typed, checked once.
+"""Where a folder of meshes' LiDAR crops are placed, class by class, and the shape each mesh is given: typed, checked
+once (``experiment sim2real``'s ``lidar`` sets and ``fit-sensor --meshes``).
 
 A LiDAR training set draws the crops of a mesh from one
 :class:`~zbuf_occlude.sensors.placement.CropDistributions` made of three layers, each over the one
@@ -11,7 +12,7 @@ before (:meth:`CropPlacement.crop_distributions`):
    to: the widths across the line of sight, the outline over the height, and how the widths
    are met (:data:`WIDTH_BY`);
 3. the mesh's own :class:`MeshShape` (:attr:`CropPlacement.per_mesh`, keyed by
-   :attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`): the stretch, visible share
+   :attr:`~zbuf_occlude.mesh.inputs.class_folders.MeshEntry.name`): the stretch, visible share
    and warp fitted to those targets once for every set and seed (:func:`fit_mesh_shapes`).  A
    mesh without one, in a class that gives targets, is fitted in each set's draw
    (:meth:`ClassPlacement.fit_mesh`), to the same shape.
@@ -29,13 +30,13 @@ from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.errors import ArgumentTypeError, InvalidInputError
-from zbuf_occlude.experiments.sim2real.meshes import MeshEntry
+from zbuf_occlude.mesh.inputs.class_folders import MeshEntry
 from zbuf_occlude.mesh.sizes import SizeRange, size_interval
 
 if TYPE_CHECKING:  # the sensors are imported where they are used
     from zbuf_occlude.sensors.placement import CropDistributions
 
-__all__ = ["LIDAR_PLACEMENT", "WIDTH_BY", "ClassPlacement", "MeshShape", "CropPlacement", "fit_mesh_shapes"]
+__all__ = ["LIDAR_PLACEMENT", "MIN_RETURNS", "WIDTH_BY", "crops_to_draw", "ClassPlacement", "MeshShape", "CropPlacement", "fit_mesh_shapes"]
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,9 @@ log = logging.getLogger(__name__)
 #: ≈ 21 m) up to 25 m, from 5 m (closer, the object leaves the vertical field of view); the
 #: height of a roof mount on a passenger car or small UGV (1.6–2.0 m; KITTI's HDL-64E: 1.73 m).
 LIDAR_PLACEMENT = {"distance_m": (5.0, 25.0), "height_m": (1.6, 2.0)}
+#: A crop with fewer returns is redrawn: a segmentation pipeline drops clusters this small, and
+#: a handful of points padded to ``n_points`` describes no shape (fixed before any real scan was scored).
+MIN_RETURNS = 30
 #: How a class's ``across_sight_width_by`` meets its ``across_sight_width_m``: a horizontal
 #: stretch of each mesh, the same stretch where it widens the mesh and none where it would
 #: narrow it, or a side occluder that leaves part of it in view
@@ -191,7 +195,7 @@ class CropPlacement:
     per_class : mapping of str to ClassPlacement
         Keyed by class name; a class not in it gets ``ClassPlacement()`` (:data:`LIDAR_PLACEMENT`, the meshes' own shapes).
     per_mesh : mapping of str to MeshShape
-        Keyed by mesh name (:attr:`~zbuf_occlude.experiments.sim2real.meshes.MeshEntry.name`): the shapes
+        Keyed by mesh name (:attr:`~zbuf_occlude.mesh.inputs.class_folders.MeshEntry.name`): the shapes
         fitted once (:func:`fit_mesh_shapes`, :meth:`with_mesh_shapes`).
 
     Raises
@@ -249,6 +253,11 @@ class CropPlacement:
         own = self.per_mesh.get(entry.name) or MeshShape()
         keywords = {**LIDAR_PLACEMENT, **target.crop_keywords, **own.keywords}
         return CropDistributions(size_m=size_interval(entry.mesh.extents, size), **keywords), target
+
+
+def crops_to_draw(want: int) -> int:
+    """Crops drawn in a first round to keep ``want`` with enough returns: a fifth more, at least one (some miss the object)."""
+    return want + max(1, want // 5)
 
 
 def _made(kind: type, keywords: Mapping[str, Any], what: str):

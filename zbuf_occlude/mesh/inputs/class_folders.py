@@ -1,4 +1,5 @@
-"""The meshes of the sim-to-real experiment: one class per folder, loaded once, split into whole-mesh sides.
+"""A folder of meshes, one class per folder, loaded once and split into whole-mesh sides (``experiment sim2real``'s and
+``fit-sensor --meshes``' input).
 
 :func:`find_class_meshes` reads ``root/CLASS/...`` (any format :func:`zbuf_occlude.load_mesh`
 reads), drops byte-identical duplicates and checks that every class can be validated;
@@ -19,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.learn.data import dedupe_meshes
+from zbuf_occlude.mesh.inputs.duplicates import dedupe_meshes
 
 if TYPE_CHECKING:  # trimesh is imported where it is used
     import trimesh
@@ -34,7 +35,7 @@ class MeshEntry:
     """One mesh of the experiment: file, class, stable name, the loaded (z-up, normalised) mesh.
 
     ``name`` is the file's path below the root without its suffix (``car/sedan``): the key of the
-    mesh's own shape in :attr:`~zbuf_occlude.experiments.sim2real.placement.CropPlacement.per_mesh`.
+    mesh's own shape in :attr:`~zbuf_occlude.sensors.fit.class_placement.CropPlacement.per_mesh`.
     """
 
     path: Path

@@ -1,4 +1,4 @@
-"""The partial echoes' fit (experiments/partial_echo_fit.py): scans made with a known min_echo_reflectance give it back; the
+"""The partial echoes' fit (sensors/fit/partial_echo_meshes.py): scans made with a known min_echo_reflectance give it back; the
 classes shared by the scans and the mesh folders, and what the fit refuses, in one line."""
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ import pytest
 import trimesh
 
 from zbuf_occlude.errors import InvalidInputError, UnsafePathError
-from zbuf_occlude.experiments import partial_echo_crops as pc
-from zbuf_occlude.experiments import partial_echo_fit as pe
-from zbuf_occlude.experiments.sim2real.meshes import find_class_meshes
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
+from zbuf_occlude.sensors.fit import mesh_crops as pc
+from zbuf_occlude.sensors.fit import partial_echo_meshes as pe
+from zbuf_occlude.mesh.inputs.class_folders import find_class_meshes
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.real_scans.records import RealScan
 from zbuf_occlude.sensors.kinds import sensor_from_name, with_beam
 from zbuf_occlude.sensors.patterns.spinning import lidar_preset
@@ -154,7 +154,7 @@ def test_a_class_without_a_real_size_is_refused_naming_sizes_before_a_mesh_is_re
 
 
 def test_a_mesh_folder_reads_its_files_with_their_up_axes(tmp_path: Path) -> None:
-    from zbuf_occlude.experiments.sim2real.meshes import MeshFolder
+    from zbuf_occlude.mesh.inputs.class_folders import MeshFolder
 
     root = write_meshes(tmp_path / "meshes")
     upright = {m.name: m.mesh.extents for m in MeshFolder(root, "+z").find()}

@@ -5,13 +5,13 @@ receiver that reports such partial echoes makes scan lines that run on past the 
 that drops them makes shorter lines and more broken ones.  The threshold is read from what it does
 to whole objects (:mod:`zbuf_occlude.sensors.fit.partial_echoes`): per class shared by the real
 scans and a folder of meshes, the real scans' outline share (the share of points that end a run of
-their ring's scan line, :func:`~zbuf_occlude.experiments.realism_stats.outline_share`) against the
+their ring's scan line, :func:`~zbuf_occlude.sensors.fit.scan_lines.outline_share`) against the
 same statistic of the meshes scanned at each threshold of a grid, and the threshold whose
 simulated medians meet the real ones (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
 
 The meshes are scanned as ``experiment sim2real``'s ``lidar`` set, and only scans whose centroid lies
-:data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M` away count, real and simulated
-(:mod:`zbuf_occlude.experiments.partial_echo_crops`, which holds the crops, their placements and
+:data:`~zbuf_occlude.sensors.fit.mesh_crops.MATCHED_RANGE_M` away count, real and simulated
+(:mod:`zbuf_occlude.sensors.fit.mesh_crops`, which holds the crops, their placements and
 the outline share of each).  This module holds the fit: the beam it scans with, the fit from a
 folder of meshes or from meshes already loaded, its result, and the step ``fit-sensor --meshes`` runs.
 
@@ -41,10 +41,10 @@ from typing import TYPE_CHECKING, Any
 
 from zbuf_occlude.defaults import MAX_SAMPLES
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.experiments.partial_echo_crops import MATCHED_RANGE_M, Say, real_shares, simulated_shares
-from zbuf_occlude.experiments.sim2real.meshes import MeshEntry, MeshFolder
-from zbuf_occlude.experiments.sim2real.placement import CropPlacement
-from zbuf_occlude.experiments.sim2real.real import real_label
+from zbuf_occlude.sensors.fit.mesh_crops import MATCHED_RANGE_M, Say, real_shares, simulated_shares
+from zbuf_occlude.mesh.inputs.class_folders import MeshEntry, MeshFolder
+from zbuf_occlude.sensors.fit.class_placement import CropPlacement
+from zbuf_occlude.real_scans.records import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam.fields import footprint_changes
 from zbuf_occlude.sensors.checks import count
@@ -117,7 +117,7 @@ class PartialEchoResult:
         The classes fitted on.
     skipped : dict of str to str
         Each class left out, and why (no meshes, no real scans, none at
-        :data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M`, ...).
+        :data:`~zbuf_occlude.sensors.fit.mesh_crops.MATCHED_RANGE_M`, ...).
     crops : dict of str to int
         Per class fitted, the simulated crops compared (the same at every threshold).
     crops_per_mesh, seed : int
@@ -173,7 +173,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
         (:func:`partial_echo_sensor`).
     meshes : sequence of MeshEntry
     crops_per_mesh, seed, placement, sizes
-        :func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`'s (the seed also seeds the bootstrap).
+        :func:`~zbuf_occlude.sensors.fit.mesh_crops.mesh_crops`'s (the seed also seeds the bootstrap).
     bootstrap : int
         Resamples of the fit's bootstrap (:func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance`).
     grid : sequence of float
@@ -189,8 +189,8 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     ------
     InvalidInputError
         A sensor :func:`partial_echo_sensor` refuses (before anything is scanned); a real scan without sensor-frame points;
-        no class left with real scans and crops at :data:`~zbuf_occlude.experiments.partial_echo_crops.MATCHED_RANGE_M`
-        (naming each class and why); what :func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops` and
+        no class left with real scans and crops at :data:`~zbuf_occlude.sensors.fit.mesh_crops.MATCHED_RANGE_M`
+        (naming each class and why); what :func:`~zbuf_occlude.sensors.fit.mesh_crops.mesh_crops` and
         :func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance` refuse.
     """
     say = say or _quiet
@@ -226,7 +226,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
 
 
 def mesh_classes(root: str | os.PathLike) -> list[str]:
-    """The class folders of ``root`` that hold mesh files (as :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`
+    """The class folders of ``root`` that hold mesh files (as :func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`
     finds them: hidden entries passed over, links and special files as
     :func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files` treats them), sorted.
 
@@ -283,11 +283,11 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
         whose beam has a divergence (its data sheet's).
     meshes : path or MeshFolder
         One sub-folder per class of mesh files, as ``experiment sim2real`` reads them
-        (:func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes`: byte-identical files dropped;
+        (:func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`: byte-identical files dropped;
         two classes or more shared with the scans, two meshes or more each); a
-        :class:`~zbuf_occlude.experiments.sim2real.meshes.MeshFolder` with the meshes' up axes (a path: ``auto``).
+        :class:`~zbuf_occlude.mesh.inputs.class_folders.MeshFolder` with the meshes' up axes (a path: ``auto``).
     crops_per_mesh : int
-        Crops of each mesh at each threshold (:func:`~zbuf_occlude.experiments.partial_echo_crops.mesh_crops`), 1 to
+        Crops of each mesh at each threshold (:func:`~zbuf_occlude.sensors.fit.mesh_crops.mesh_crops`), 1 to
         :data:`~zbuf_occlude.defaults.MAX_SAMPLES`.
     seed : int
         Seeds the crops' draws and the bootstrap.
@@ -307,7 +307,7 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     InvalidInputError
         ``sensor`` no spinning LiDAR or its beam without a divergence, ``crops_per_mesh`` out of range, ``meshes`` not a
         folder (all before a mesh is read); no class shared by the scans and the mesh folders (naming both folders and
-        their classes); what :func:`~zbuf_occlude.experiments.sim2real.meshes.find_class_meshes` and
+        their classes); what :func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes` and
         :func:`fit_partial_echoes_to_meshes` refuse.
     MeshLoadError
         A mesh that cannot be loaded, named.
