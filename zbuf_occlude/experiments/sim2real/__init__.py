@@ -1,12 +1,12 @@
 """Sim-to-real: classifiers trained only on clouds made from meshes, tested on real scans (``experiment sim2real``).
 
 The package: :mod:`.config` (:class:`Sim2RealConfig`, every setting of a run, checked once),
-:mod:`.meshes` (the meshes per class and their whole-mesh splits), :mod:`.placement` (where the LiDAR
-crops are placed and how each mesh is shaped), :mod:`.real` (the real scans as clouds and their fixed
-halves), :mod:`.data` (the training sets), :mod:`.outputs` (the files a run writes, ``runs.jsonl``),
+:mod:`.real` (the real scans as clouds and their fixed halves), :mod:`.data` (the training sets), :mod:`.outputs` (the files a run writes, ``runs.jsonl``),
 :mod:`.report` (mean ± std over seeds, permutation tests, the table and the figure) and :mod:`.run`
 (:func:`run_sim2real`, the whole command; its argparse face is :mod:`zbuf_occlude.cli.sim2real`).
-The protocol and the results: docs/results/sim2real.md.
+The meshes per class and their whole-mesh splits are :mod:`zbuf_occlude.mesh.inputs.class_folders`'s, where the LiDAR
+crops are placed and how each mesh is shaped :mod:`zbuf_occlude.sensors.fit.class_placement`'s (``fit-sensor --meshes``
+places its crops so too).  The protocol and the results: docs/results/sim2real.md.
 """
 
 from zbuf_occlude.experiments.sim2real.config import (

@@ -29,8 +29,8 @@ Every cloud ends ``(n_points, 3) float32`` in the pipeline's frame (z up) and is
 like the paper's (bounding-box centre 0, max extent 1), or, with ``keep_scale``, centred and
 divided by :data:`KEEP_SCALE_UNIT_M` so that size stays a cue.
 
-The meshes are found in :mod:`.meshes`, the crops placed and the meshes shaped in
-:mod:`.placement`, the real scans read in :mod:`.real`.
+The meshes are found in :mod:`zbuf_occlude.mesh.inputs.class_folders`, the crops placed and the meshes shaped in
+:mod:`zbuf_occlude.sensors.fit.class_placement`, the real scans read in :mod:`.real`.
 """
 
 from __future__ import annotations
