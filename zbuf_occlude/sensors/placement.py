@@ -388,10 +388,10 @@ class ObjectPlacement:
     occlude: bool = False
     names: Mapping[str, str] = field(default_factory=dict)
 
-    def name_of(self, field: str) -> str:
-        """How the caller calls ``field`` in a message: its option in :attr:`names` (``--max-returns``), else the field's
-        own name (:func:`~zbuf_occlude.sensors.checks.namer`)."""
-        return namer(self.names)(field)
+    def name_of(self, name: str) -> str:
+        """How the caller calls the field ``name`` in a message: its option in :attr:`names` (``--max-returns``), else
+        ``name`` (:func:`~zbuf_occlude.sensors.checks.namer`)."""
+        return namer(self.names)(name)
 
     def __post_init__(self) -> None:
         n = self.name_of

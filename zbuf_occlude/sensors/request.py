@@ -264,10 +264,10 @@ class ScanRequest:
     kind: SensorKind = field(init=False, repr=False, compare=False)
     cast: str = field(init=False, compare=False)
 
-    def name_of(self, field: str) -> str:
-        """How the caller calls ``field`` in a message: its option in :attr:`names` (``--max-returns``), else the field's
-        own name (:func:`~zbuf_occlude.sensors.checks.namer`)."""
-        return namer(self.names)(field)
+    def name_of(self, name: str) -> str:
+        """How the caller calls the field ``name`` in a message: its option in :attr:`names` (``--max-returns``), else
+        ``name`` (:func:`~zbuf_occlude.sensors.checks.namer`)."""
+        return namer(self.names)(name)
 
     def __post_init__(self) -> None:
         n = self.name_of
