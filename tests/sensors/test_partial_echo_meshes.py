@@ -81,7 +81,7 @@ def test_no_shared_class_is_refused_naming_both_folders(tmp_path: Path) -> None:
     root = write_meshes(tmp_path / "meshes")
     scans = [RealScan(np.zeros((3, 3), np.float32), "chair", str(tmp_path / "real" / "Chair" / "a.csv"), "folder",
                       points_sensor_m=np.ones((3, 3)))]  # fmt: skip
-    with pytest.raises(InvalidInputError, match=r"^--meshes .*meshes and .*real.Chair share no class: meshes of \['car', 'pole'\], "
+    with pytest.raises(InvalidInputError, match=r"^meshes .*meshes and .*real.Chair share no class: meshes of \['car', 'pole'\], "
                                                 r"real scans of \['chair'\]"):  # fmt: skip
         pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), root)
 
@@ -103,11 +103,11 @@ def test_crops_out_of_range_or_none_near_enough_are_refused(tmp_path: Path) -> N
 def test_a_beam_without_divergence_or_a_sensor_of_another_kind_is_refused_before_a_mesh_is_read(tmp_path: Path) -> None:
     (tmp_path / "car").mkdir()
     (tmp_path / "car" / "bad.obj").write_text("not a mesh")  # never read
-    with pytest.raises(InvalidInputError, match=r"^--meshes samples the beam's divergence cone, and hdl64e's beam .* divergence_deg"):
+    with pytest.raises(InvalidInputError, match=r"^meshes samples the beam's divergence cone, and hdl64e's beam .* divergence_deg"):
         pe.fit_partial_echoes([], lidar_preset("hdl64e"), tmp_path)
-    with pytest.raises(InvalidInputError, match="^--meshes: the partial echoes are fitted for a spinning LiDAR, not a AirborneScanner"):
+    with pytest.raises(InvalidInputError, match="^meshes: the partial echoes are fitted for a spinning LiDAR, not a AirborneScanner"):
         pe.fit_partial_echoes([], sensor_from_name("riegl-q1560"), tmp_path)
-    with pytest.raises(InvalidInputError, match=r"^--meshes .*nowhere is not a folder$"):
+    with pytest.raises(InvalidInputError, match=r"^meshes .*nowhere is not a folder$"):
         pe.fit_partial_echoes([], lidar_preset("hdl32e"), tmp_path / "nowhere")
 
 
@@ -149,8 +149,11 @@ def test_a_class_without_a_real_size_is_refused_naming_sizes_before_a_mesh_is_re
     (tmp_path / "chair").mkdir()
     (tmp_path / "chair" / "bad.obj").write_text("not a mesh")  # never read
     scans = [RealScan(np.zeros((3, 3), np.float32), "chair", "real/chair/a.csv", "folder", points_sensor_m=np.ones((3, 3)))]
-    with pytest.raises(InvalidInputError, match=r"^--meshes: classes \['chair'\] have no real size .*give --sizes CLASS=DIMENSION"):
+    with pytest.raises(InvalidInputError, match=r"^meshes: classes \['chair'\] have no real size .*give sizes CLASS=DIMENSION"):
         pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), tmp_path)
+    # a caller's names for them, as fit-sensor gives its options
+    with pytest.raises(InvalidInputError, match=r"^--meshes: classes \['chair'\] have no real size .*give --sizes CLASS=DIMENSION"):
+        pe.fit_partial_echoes(scans, lidar_preset("hdl32e"), tmp_path, names={"meshes": "--meshes", "sizes": "--sizes"})
 
 
 def test_a_mesh_folder_reads_its_files_with_their_up_axes(tmp_path: Path) -> None:

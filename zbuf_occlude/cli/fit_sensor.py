@@ -56,12 +56,13 @@ def _refine(args: argparse.Namespace, say):
     up_map = parse_up_map(args.up_map)
     crops = DEFAULT_CROPS_PER_MESH if args.crops_per_mesh is None else args.crops_per_mesh
     return partial_echo_refine(args.meshes, crops_per_mesh=crops, seed=args.seed, up=args.up or "auto", up_map=up_map,
-                               sizes=parse_sizes(args.sizes), say=say)  # fmt: skip
+                               sizes=parse_sizes(args.sizes), say=say, names=FIT_SENSOR_OPTIONS)  # fmt: skip
 
 
-#: ``fit-sensor``'s option of each argument of :func:`~zbuf_occlude.sensors.fit.engine.fit_sensor`, for its messages.
+#: ``fit-sensor``'s option of each argument of :func:`~zbuf_occlude.sensors.fit.engine.fit_sensor` and of the partial echoes'
+#: fit (:func:`~zbuf_occlude.sensors.fit.partial_echo_meshes.partial_echo_refine`), for their messages.
 FIT_SENSOR_OPTIONS = {"out": "--out", "sensor": "--sensor", "altitude_m": "--altitude", "classes": "--classes", "bootstrap": "--bootstrap",
-                      "divergence_shares": "--divergence-shares"}  # fmt: skip
+                      "divergence_shares": "--divergence-shares", "meshes": "--meshes", "sizes": "--sizes"}  # fmt: skip
 
 
 def cmd_fit_sensor(args: argparse.Namespace) -> int:

@@ -130,7 +130,7 @@ class Refinement:
 @dataclass(frozen=True)
 class Refine:
     """A step run after a spinning LiDAR's fit to object scans and before anything is written: it fits more of the sensor
-    (``fit-sensor --meshes``: the detection of partial echoes, by the experiments, which this package does not import).
+    (``fit-sensor --meshes``: the detection of partial echoes, :func:`~zbuf_occlude.sensors.fit.partial_echo_meshes.partial_echo_refine`).
 
     Attributes
     ----------

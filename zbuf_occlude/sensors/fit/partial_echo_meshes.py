@@ -47,7 +47,7 @@ from zbuf_occlude.sensors.fit.class_placement import CropPlacement
 from zbuf_occlude.real_scans.records import real_label
 from zbuf_occlude.mesh.sizes import CLASS_SIZES_M, SizeRange
 from zbuf_occlude.sensors.beam.fields import footprint_changes
-from zbuf_occlude.sensors.checks import count
+from zbuf_occlude.sensors.checks import count, namer
 from zbuf_occlude.sensors.fit.engine import Refine, Refinement
 from zbuf_occlude.sensors.fit.lidar import BOOTSTRAP
 from zbuf_occlude.sensors.fit.partial_echoes import FIT_GRID, PartialEchoFit, fit_min_echo_reflectance
@@ -68,15 +68,13 @@ log = logging.getLogger(__name__)
 #: assumption (Velodyne does not publish the HDL-32E's pulse length); with one return per pulse it only decides
 #: which sub-ray hits merge into one echo before the strongest is taken.
 SIMULATION_RANGE_RESOLUTION_M = 0.75
-#: What ``fit-sensor`` calls the option that asks for this fit, named in its refusals.
-MESHES_OPTION = "--meshes"
 
 
 def _quiet(_: str) -> None:
     """A ``say`` that says nothing."""
 
 
-def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None) -> Lidar:
+def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None, *, names: Mapping[str, str] | None = None) -> Lidar:
     """``sensor`` with the beam a partial-echo fit scans with (module docstring), and ``min_echo_reflectance`` where given.
 
     The footprint: :func:`~zbuf_occlude.sensors.beam.fields.footprint_changes` (at least
@@ -88,14 +86,16 @@ def partial_echo_sensor(sensor: Lidar, min_echo_reflectance: float | None = None
     Raises
     ------
     InvalidInputError
-        ``sensor`` is no spinning LiDAR; its beam has no divergence (naming ``--meshes`` and the beam's
-        ``divergence_deg``); a ``min_echo_reflectance`` outside [0, 1].
+        ``sensor`` is no spinning LiDAR; its beam has no divergence (naming ``meshes`` and the beam's
+        ``divergence_deg``); a ``min_echo_reflectance`` outside [0, 1].  Messages name ``meshes`` and ``sensor`` as
+        ``names`` maps them (``{"meshes": "--meshes"}``).
     """
+    n = namer(names)
     if not capabilities(sensor).spins:
-        raise InvalidInputError(f"{MESHES_OPTION}: the partial echoes are fitted for a spinning LiDAR, not a {type(sensor).__name__}")
+        raise InvalidInputError(f"{n('meshes')}: the partial echoes are fitted for a spinning LiDAR, not a {type(sensor).__name__}")
     beam = sensor.beam
     changes = footprint_changes(beam, footprint=True, divergence_deg=None, sensor=sensor.name,
-                                names=(MESHES_OPTION, "a --sensor JSON whose beam has divergence_deg"))  # fmt: skip
+                                names=(n("meshes"), f"a {n('sensor')} JSON whose beam has divergence_deg"))  # fmt: skip
     changes |= {"return_mode": "strongest", "max_returns": 1, "echo_separation_m": 0.0,
                 "range_resolution_m": beam.range_resolution_m if beam.range_resolution_m > 0 else SIMULATION_RANGE_RESOLUTION_M}  # fmt: skip
     if min_echo_reflectance is not None:
@@ -160,7 +160,7 @@ class PartialEchoResult:
 def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshes: Sequence[MeshEntry], *, crops_per_mesh: int = 4,
                                  seed: int = 0, bootstrap: int = BOOTSTRAP, grid: Sequence[float] = FIT_GRID,
                                  placement: CropPlacement | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
-                                 say: Say | None = None) -> PartialEchoResult:  # fmt: skip
+                                 say: Say | None = None, names: Mapping[str, str] | None = None) -> PartialEchoResult:  # fmt: skip
     """:func:`fit_partial_echoes` on meshes already loaded: every class of ``meshes`` is fitted on, with the real
     scans labelled with it (its name, or in lower case); other real scans are left out.
 
@@ -180,6 +180,8 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
         The thresholds simulated, two or more in [0, 1] (default :data:`~zbuf_occlude.sensors.fit.partial_echoes.FIT_GRID`).
     say : callable, optional
         Told each step (the command line prints it).
+    names : mapping of str to str, optional
+        How the caller calls ``meshes``, ``sizes`` and ``sensor`` in messages (:func:`~zbuf_occlude.sensors.checks.namer`).
 
     Returns
     -------
@@ -194,10 +196,10 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
         :func:`~zbuf_occlude.sensors.fit.partial_echoes.fit_min_echo_reflectance` refuse.
     """
     say = say or _quiet
-    base = partial_echo_sensor(sensor)
+    base = partial_echo_sensor(sensor, names=names)
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     classes = sorted({m.class_name for m in meshes})
-    _check_sizes(classes, sizes)
+    _check_sizes(classes, sizes, namer(names))
     real = real_shares(scans, classes)
     skipped = {c: f"no real scan {MATCHED_RANGE_M[0]:g}-{MATCHED_RANGE_M[1]:g} m away" for c in classes if not real[c]}
     fitted = [c for c in classes if c not in skipped]
@@ -225,7 +227,7 @@ def fit_partial_echoes_to_meshes(scans: Sequence[RealScan], sensor: Lidar, meshe
     return PartialEchoResult(fit, fitted_sensor, tuple(fitted), skipped, {c: len(first[c]) for c in fitted}, crops_per_mesh, seed)
 
 
-def mesh_classes(root: str | os.PathLike) -> list[str]:
+def mesh_classes(root: str | os.PathLike, *, names: Mapping[str, str] | None = None) -> list[str]:
     """The class folders of ``root`` that hold mesh files (as :func:`~zbuf_occlude.mesh.inputs.class_folders.find_class_meshes`
     finds them: hidden entries passed over, links and special files as
     :func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files` treats them), sorted.
@@ -233,7 +235,7 @@ def mesh_classes(root: str | os.PathLike) -> list[str]:
     Raises
     ------
     InvalidInputError
-        ``root`` is not a folder.
+        ``root`` is not a folder (naming ``meshes`` as ``names`` maps it).
     UnsafePathError
         As :func:`~zbuf_occlude.mesh.inputs.discovery.walk_mesh_files`.
     """
@@ -241,16 +243,16 @@ def mesh_classes(root: str | os.PathLike) -> list[str]:
 
     root = Path(root)
     if not root.is_dir():
-        raise InvalidInputError(f"{MESHES_OPTION} {root} is not a folder")
+        raise InvalidInputError(f"{namer(names)('meshes')} {root} is not a folder")
     files, _ = walk_mesh_files(root, skip_hidden=True)
     return sorted({f.relative_to(root).parts[0] for f in files if len(f.relative_to(root).parts) >= 2})
 
 
-def _check_sizes(classes: Sequence[str], sizes: Mapping[str, SizeRange]) -> None:
-    """Refuse classes without a real size in ``sizes``, naming ``--sizes``: their meshes' crops have no scale."""
+def _check_sizes(classes: Sequence[str], sizes: Mapping[str, SizeRange], n) -> None:
+    """Refuse classes without a real size in ``sizes``, naming ``sizes`` as ``n`` does: their meshes' crops have no scale."""
     missing = [c for c in classes if c not in sizes]
     if missing:
-        raise InvalidInputError(f"{MESHES_OPTION}: classes {missing} have no real size to scale their meshes to: give --sizes "
+        raise InvalidInputError(f"{n('meshes')}: classes {missing} have no real size to scale their meshes to: give {n('sizes')} "
                                 f"CLASS=DIMENSION:LO-HI,... (e.g. {missing[0]}=height:0.5-1.5; known: {sorted(sizes)})")  # fmt: skip
 
 
@@ -265,7 +267,7 @@ def _real_folder(scans: Sequence[RealScan]) -> str:
 def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | os.PathLike | MeshFolder, *, crops_per_mesh: int = 4,
                        seed: int = 0, bootstrap: int = BOOTSTRAP, placement: CropPlacement | None = None,
                        sizes: Mapping[str, SizeRange] = CLASS_SIZES_M, grid: Sequence[float] = FIT_GRID,
-                       say: Say | None = None) -> PartialEchoResult:  # fmt: skip
+                       say: Say | None = None, names: Mapping[str, str] | None = None) -> PartialEchoResult:  # fmt: skip
     """Fit ``sensor``'s ``min_echo_reflectance`` to real object scans by scanning the meshes of the same classes (module docstring).
 
     The classes are the real scans' labels that have a class folder under ``meshes`` (a label matches its
@@ -295,6 +297,8 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
         Resamples of the fit's bootstrap.
     placement, sizes, grid, say
         As :func:`fit_partial_echoes_to_meshes`.
+    names : mapping of str to str, optional
+        As :func:`fit_partial_echoes_to_meshes`'s (``fit-sensor``: ``--meshes`` ...); default the fields' own names.
 
     Returns
     -------
@@ -314,33 +318,35 @@ def fit_partial_echoes(scans: Sequence[RealScan], sensor: Lidar, meshes: str | o
     UnsafePathError
         A link under ``meshes`` that leads out of it to a file of another kind.
     """
-    say = say or _quiet
-    partial_echo_sensor(sensor)  # refused before any mesh is read
+    say, n = say or _quiet, namer(names)
+    partial_echo_sensor(sensor, names=names)  # refused before any mesh is read
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
     meshes = meshes if isinstance(meshes, MeshFolder) else MeshFolder(meshes)
-    folders = mesh_classes(meshes.root)
+    folders = mesh_classes(meshes.root, names=names)
     labels = sorted({real_label(s.label, folders) for s in scans})
     shared = [c for c in folders if c in labels]
     if not shared:
-        raise InvalidInputError(f"{MESHES_OPTION} {meshes.root} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
+        raise InvalidInputError(f"{n('meshes')} {meshes.root} and {_real_folder(scans)} share no class: meshes of {folders or 'none'}, "
                                 f"real scans of {labels or 'none'} (a class folder of meshes is named as the scans' label)")  # fmt: skip
-    _check_sizes(shared, sizes)  # before a mesh is read
+    _check_sizes(shared, sizes, n)  # before a mesh is read
     skipped = {c: "no meshes" for c in labels if c not in shared} | {c: "no real scans" for c in folders if c not in shared}
     if skipped:
         log.info("partial echoes: classes left out: %s", skipped)
         say(f"partial echoes: fitting on {', '.join(shared)}; left out: {', '.join(f'{c} ({w})' for c, w in sorted(skipped.items()))}")
     entries = meshes.find(classes=shared)
     result = fit_partial_echoes_to_meshes(scans, sensor, entries, crops_per_mesh=crops_per_mesh, seed=seed, bootstrap=bootstrap,
-                                          grid=grid, placement=placement, sizes=sizes, say=say)  # fmt: skip
+                                          grid=grid, placement=placement, sizes=sizes, say=say, names=names)  # fmt: skip
     return replace(result, skipped={**skipped, **result.skipped})
 
 
 def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, seed: int = 0, up: str = "auto",
                         up_map: Mapping[str, str] | None = None, sizes: Mapping[str, SizeRange] = CLASS_SIZES_M,
-                        say: Say | None = None) -> Refine:  # fmt: skip
+                        say: Say | None = None, names: Mapping[str, str] | None = None) -> Refine:  # fmt: skip
     """``fit-sensor --meshes``: the step :func:`~zbuf_occlude.sensors.fit.engine.fit_sensor` runs after a spinning LiDAR's
     fit and before it writes: :func:`fit_partial_echoes` on the scans it read, the fitted sensor written in place of
     the geometry's, the fit under ``fit.partial_echoes`` in its JSON and its table in the ``.md``.
+
+    Messages name ``meshes``, ``sizes`` and ``sensor`` as ``names`` maps them (:func:`fit_partial_echoes`).
 
     Raises
     ------
@@ -348,11 +354,11 @@ def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, s
         ``meshes`` not a folder, ``crops_per_mesh`` out of range (both now, before any scan is read).
     """
     crops_per_mesh = count(crops_per_mesh, "crops_per_mesh", low=1, high=MAX_SAMPLES)
-    mesh_classes(meshes)  # a missing folder is refused before the scans are read
+    mesh_classes(meshes, names=names)  # a missing folder is refused before the scans are read
 
     def run(fit: Any, scans: Sequence[RealScan]) -> Refinement:
         result = fit_partial_echoes(scans, fit.sensor, MeshFolder(meshes, up, dict(up_map or {})), crops_per_mesh=crops_per_mesh,
-                                    seed=seed, sizes=sizes, say=say)  # fmt: skip
+                                    seed=seed, sizes=sizes, say=say, names=names)  # fmt: skip
         e = result.fit.estimate
         if say is not None:
             say(
@@ -362,4 +368,4 @@ def partial_echo_refine(meshes: str | os.PathLike, *, crops_per_mesh: int = 4, s
             )
         return Refinement(result.sensor, {"partial_echoes": result.to_json()}, result.markdown(), result)
 
-    return Refine(MESHES_OPTION, run)
+    return Refine(namer(names)("meshes"), run)
