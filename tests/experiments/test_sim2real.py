@@ -1073,7 +1073,7 @@ def test_the_identity_of_a_config_is_what_recorded_runs_hold_so_they_resume(path
         method=s["method"], occluded_elevation_deg=tuple(s["occluded_elevation_deg"]), fit_sensor=bool(fit),
         recipe="stable" if tc.get("balance") == "sampler" else "plain", best_epoch_by=tc.get("select", "accuracy"),
         validate_on=s.get("validate_on", "meshes"),
-        fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False), sets=tuple(s.get("sets", ())),
+        fitted_shape=tuple(fit.get("fitted_shape", ())), aspect=tc.get("aspect", False), partial=tc.get("partial", False), sets=tuple(s.get("sets", ())),
         **({"fit_families": True, "family_count": s["fit_families"]["objects_per_class"]} if "fit_families" in s else {}),
     )  # fmt: skip
     identity = json.loads(json.dumps(config.identity(), default=float))  # as run_sim2real compares it
