@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     from zbuf_occlude.visibility import visible_mask
     from zbuf_occlude.visibility.embree_fast import FastScene
     from zbuf_occlude.visibility.gpu_exact import ExactScene
-    from zbuf_occlude.visibility.zbuffer import Scene
+    from zbuf_occlude.visibility.zbuffer import ResidentPoints
 
     meshes: dict[str, trimesh.Trimesh] = {}
     files = sorted(MODELNET_SUBSET.rglob("*.off")) if MODELNET_SUBSET.is_dir() else []
@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
             configs.append(("zbuffer (issue 3) 1024² fi", "legacy", 1024, True))
         for label, kind, res, use_fi in configs:
             f = fi if use_fi else None
-            scene = {"exact": ExactScene, "fast": FastScene, "legacy": Scene}[kind](mesh, points, f)
+            scene = {"exact": ExactScene, "fast": FastScene, "legacy": ResidentPoints}[kind](mesh, points, f)
             agree = fv = cpu = total = 0
             for (el, az), want in zip(poses, truth):
                 cam = zo.camera_on_sphere(el, az, resolution=res or 1024)
