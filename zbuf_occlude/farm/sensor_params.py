@@ -161,10 +161,10 @@ class SensorCropParams:
             beam refuses; ``footprint_cast`` "adaptive" for a beam that fires one ray or resolves no
             echoes.  Each names its ``farm`` option.
         """
-        from zbuf_occlude.sensors.kinds import kind_of, sensor_from_name
+        from zbuf_occlude.sensors.kinds import capabilities, sensor_from_name
 
         sensor = sensor_from_name(self.name)
-        kind = kind_of(sensor)
+        kind = capabilities(sensor)  # the kinds table's capabilities, asked once; the request reads the same row
         given = [OPTION_NAMES[f"sensor_{f}"] for f, v in (("footprint", self.footprint), ("divergence_deg", self.divergence_deg),
                                                          ("reflectivity", self.distributions.reflectivity),
                                                          ("adaptive_footprint", self.footprint_cast == "adaptive")) if v not in (None, False)]  # fmt: skip
