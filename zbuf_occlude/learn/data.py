@@ -226,8 +226,7 @@ def _partial(points: NDArray[np.float32], rng: np.random.Generator) -> NDArray[n
         z = points[i, :, 2]
         above = np.flatnonzero(z >= z.min() + cut[i] * (z.max() - z.min()))  # never empty: the top point stays
         kept = above[np.argsort(order[i, above], kind="stable")[: max(1, math.ceil(kept_share[i] * len(above)))]]
-        filled = np.concatenate([kept, kept[rng.integers(0, len(kept), n - len(kept))]])
-        out[i] = normalize_batch(points[i, filled][None])[0]
+        out[i] = normalize_batch(resample(points[i, kept][None], n, rng))[0]  # every point kept, then repeats
     return out
 
 
