@@ -31,7 +31,7 @@ import numpy as np
 import zbuf_occlude as zo
 from zbuf_occlude.mesh.formats import SUPPORTED_EXTENSIONS
 from zbuf_occlude.visibility.point_kernels import camera_frame, splat_surfels
-from zbuf_occlude.visibility.point_splats import splat_image
+from zbuf_occlude.visibility.splat_image import splat_image
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

@@ -18,7 +18,7 @@ from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.render import point_sprites
 from zbuf_occlude.render.point_sprites import PointSpriteRenderer, shared_point_sprites
 from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
-from zbuf_occlude.visibility.point_splats import splat_image
+from zbuf_occlude.visibility.splat_image import splat_image
 
 #: Every surfel a sprite (the GL's own limit), every surfel a quad, or 32-pixel tiles.
 PASSES = {"sprites": {}, "quads": {"max_point_size": 1.0}, "tiles": {"max_tile": 32}}

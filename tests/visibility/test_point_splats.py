@@ -47,8 +47,11 @@ def test_the_visible_cap_of_a_sampled_sphere(sphere, normals):
     assert score["accuracy"] >= 0.97
     cos = np.einsum("ij,ij->i", outward, camera.eye - points) / np.linalg.norm(camera.eye - points, axis=1)
     assert np.mean(np.abs(cos[visible != truth]) < 0.35) > 0.95
-    if normals != "none":  # with normals the front is never hidden (the convex law, below)
-        assert not np.any(truth & ~visible)
+    if normals != "none":  # with normals the front is hidden only at the rim, by the hull test at grazing sight
+        # (a smooth surface's grazing points lie among its far side's in the flipped hull: measured 0-4 of
+        # 4,278 front points, |cos| at most 0.022, from five poses); the convex law below holds for polyhedra
+        lost = truth & ~visible
+        assert np.count_nonzero(lost) <= 5 and np.all(np.abs(cos[lost]) < 0.03)
 
 
 def test_a_cube_seen_face_on_shows_its_front_face_only():

@@ -29,9 +29,13 @@ normals, where given), with the z-buffer test the mesh methods use:
    sheets: the preparation finds them and turns each point's normal out of its wall
    (:func:`~zbuf_occlude.visibility.point_preparation.thin_wall_sides`), and a view hides the
    points of a wall's side that faces away.  Normals given as oriented keep their own sides.
+5. **The hull test.**  Up to :data:`~zbuf_occlude.defaults.HULL_VETO_MAX_POINTS` points, where a splat is coarse
+   and a point behind a small part or a gap between splats wins its own pixel, the points a view keeps go to the
+   hull test of hidden point removal (HPR, Katz et al. 2007), which may hide them only
+   (:func:`~zbuf_occlude.visibility.point_hull.hull_veto`).
 
-Compared with hidden point removal (HPR, Katz et al. 2007, Open3D's ``hidden_point_removal``) it
-needs no radius; with screen-space operators (Pintus et al. 2011) and variable-density visibility
+Compared with HPR alone (Open3D's ``hidden_point_removal``) it needs no radius from the user; with
+screen-space operators (Pintus et al. 2011) and variable-density visibility
 (Biasutti et al. 2019) it shares the idea of sizing the test from the local density.
 docs/results/point_visibility.md measures it and HPR against the exact mesh oracle.
 
@@ -53,7 +57,6 @@ and so is a view (:meth:`PointSurfels.visible`) whose arrays would (:data:`BYTES
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,8 +67,9 @@ from zbuf_occlude.defaults import (
     DEFAULT_POINT_NEIGHBOURS,
     DEFAULT_SPLAT_SCALE,
     DEFAULT_SPLAT_TOLERANCE,
+    HULL_RADIUS_FACTOR_PER_POINT,
+    HULL_VETO_MAX_POINTS,
     MAX_SPLAT_PIXELS,
-    SPLAT_PIXELS_PER_RADIUS,
 )
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.geometry.arguments import check_camera, check_count, check_flag, check_nonnegative, check_points
@@ -73,10 +77,12 @@ from zbuf_occlude.geometry.cameras import Camera
 from zbuf_occlude.geometry.placement import warn_camera_placement
 from zbuf_occlude.io.point_sets import unit_normals
 from zbuf_occlude.resources import check_memory
+from zbuf_occlude.visibility.point_hull import BYTES_PER_HULL_POINT, hull_veto
 from zbuf_occlude.visibility.registry import register
+from zbuf_occlude.visibility.splat_image import splat_image
 
 __all__ = [
-    "PointSurfels", "point_surfels", "visible_mask_points", "SplatImage", "BYTES_PER_SURFEL", "BYTES_PER_ESTIMATED_NORMAL",
+    "PointSurfels", "point_surfels", "visible_mask_points", "BYTES_PER_SURFEL", "BYTES_PER_ESTIMATED_NORMAL",
     "MAX_SPLAT_COORDINATE", "MAX_SPLAT_SCALE", "BYTES_PER_THREAD", "BYTES_PER_VIEW_POINT",
 ]  # fmt: skip
 
@@ -120,19 +126,6 @@ MAX_SPLAT_COORDINATE = 1e100
 #: the k-th neighbour) already cover the image of a cloud of a million points from any view; a
 #: larger one changes nothing but the size of the numbers (``1e308`` overflows the image's area).
 MAX_SPLAT_SCALE = 1_000.0
-
-
-@dataclass(frozen=True)
-class SplatImage:
-    """The image a view's splats are rasterised into: normalised coordinates ``(x/z, y/z)`` of
-    the OpenCV camera frame, pixel ``(i, j)`` covering ``[x0 + i·pix, x0 + (i+1)·pix) ×
-    [y0 + j·pix, y0 + (j+1)·pix)``."""
-
-    pix: float
-    x0: float
-    y0: float
-    width: int
-    height: int
 
 
 @dataclass(frozen=True)
@@ -226,6 +219,7 @@ class PointSurfels:
             :data:`~zbuf_occlude.visibility.point_kernels.THREADED_MIN_POINTS` points the CPU
             kernels run on numba's threads where allowed
             (:func:`~zbuf_occlude.visibility.point_kernels.threads_for`), with the same masks.
+            Either way the hull test (module docstring, step 5) runs on the CPU.
 
         Raises
         ------
@@ -234,7 +228,7 @@ class PointSurfels:
         ArgumentTypeError
             ``camera`` not a :class:`Camera`, ``tolerance`` not a number.
         InsufficientMemoryError
-            The view's arrays (:data:`BYTES_PER_VIEW_POINT` a point, and its splat image) would need
+            The view's arrays (:data:`BYTES_PER_VIEW_POINT` a point, ``BYTES_PER_HULL_POINT`` more for the hull test, and its splat image) would need
             more memory than is available (naming the points), checked before any is allocated.
         BackendUnavailable
             ``backend="gpu"`` and no OpenGL 4.3 context can be created.
@@ -245,8 +239,9 @@ class PointSurfels:
         tol = check_nonnegative(tolerance, "tolerance")
         splat_surfels = _splatter(backend)
         n = len(self.points)
+        hull = n <= HULL_VETO_MAX_POINTS
         check_memory(
-            n * BYTES_PER_VIEW_POINT + MAX_SPLAT_PIXELS * _BYTES_PER_SPLAT_PIXEL,
+            n * (BYTES_PER_VIEW_POINT + (BYTES_PER_HULL_POINT if hull else 0)) + MAX_SPLAT_PIXELS * _BYTES_PER_SPLAT_PIXEL,
             f"a view of the splats of {n:,} points",
             hint="give fewer points (a random subset), or run where more memory is available",
         )
@@ -269,7 +264,10 @@ class PointSurfels:
             decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self._normals, sided)
         visible = np.empty_like(decided)
         visible[order] = decided
-        return visible & in_frustum
+        visible &= in_frustum
+        if hull:
+            visible = hull_veto(self.points, visible, camera.eye, HULL_RADIUS_FACTOR_PER_POINT * n)
+        return visible
 
 
 def _splatter(backend: object):
@@ -284,48 +282,6 @@ def _splatter(backend: object):
 
         return functools.partial(shared_point_sprites().splat, edge_on_cos=point_kernels.EDGE_ON_COS)
     raise InvalidInputError(f"backend must be 'cpu' or 'gpu', got {backend!r}")
-
-
-#: Largest pad of a splat image, in half-widths of the frustum (:func:`splat_image`): 1e6.
-_MAX_PAD = 1e6
-
-
-def splat_image(cam: NDArray[np.float64], radius: NDArray[np.float64], in_frustum: NDArray[np.bool_], camera: Camera) -> SplatImage:
-    """The splat image of one view: the part of the frustum that holds points, with
-    :data:`~zbuf_occlude.defaults.SPLAT_PIXELS_PER_RADIUS` pixels across the median splat radius
-    (coarser if that exceeds :data:`~zbuf_occlude.defaults.MAX_SPLAT_PIXELS`).
-
-    Parameters
-    ----------
-    cam : (N, 3) float64
-        Points, OpenCV camera frame.
-    radius : (N,) float64
-        Splat radii, object units.
-    in_frustum : (N,) bool
-        ``camera.in_frustum`` of the points; at least one True.
-    camera : Camera
-    """
-    z = cam[in_frustum, 2]
-    r = radius[in_frustum]
-    xy = cam[in_frustum, :2] / z[:, None]
-    # a splat reaching the camera plane would cover everything: its angular size is capped
-    rho = r / np.maximum(z - r, 0.5 * z)
-    half_h = math.tan(math.radians(camera.yfov_deg) / 2.0)
-    half_w = half_h * camera.width / camera.height
-    # a disk off the axis projects wider than rho, by up to a factor 1 + |x/z| (the kernel's box);
-    # past _MAX_PAD frustums the pad only makes the numbers overflow (a splat at the camera plane)
-    pad = min(float(rho.max()) * (1.0 + float(np.abs(xy).max())), _MAX_PAD * max(half_w, half_h))
-    x0 = max(float(xy[:, 0].min()), -half_w) - pad
-    x1 = min(float(xy[:, 0].max()), half_w) + pad
-    y0 = max(float(xy[:, 1].min()), -half_h) - pad
-    y1 = min(float(xy[:, 1].max()), half_h) + pad
-    extent_x, extent_y = max(x1 - x0, 1e-12), max(y1 - y0, 1e-12)
-    positive = rho[rho > 0]
-    pix = float(np.median(positive)) / SPLAT_PIXELS_PER_RADIUS if len(positive) else max(extent_x, extent_y)
-    pix = min(pix, max(extent_x, extent_y))  # one pixel covers the image at most
-    if extent_x * extent_y / (pix * pix) > MAX_SPLAT_PIXELS:
-        pix = math.sqrt(extent_x * extent_y / MAX_SPLAT_PIXELS)
-    return SplatImage(pix, x0, y0, math.ceil(extent_x / pix) + 1, math.ceil(extent_y / pix) + 1)
 
 
 def _check_coordinates(points: NDArray[np.float64]) -> None:
