@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import zbuf_occlude as zo
+from zbuf_occlude.errors import ArgumentTypeError
 from zbuf_occlude.defaults import HULL_RADIUS_FACTOR_PER_POINT, HULL_VETO_MAX_POINTS
 from zbuf_occlude.visibility import point_splats
 from zbuf_occlude.visibility.point_hull import MAX_VETOED_SHARE, flipped, hull_veto, on_flipped_hull
@@ -136,3 +137,17 @@ def test_a_view_of_few_enough_points_is_the_splats_veto_and_of_more_the_splats_a
     monkeypatch.setattr(point_splats, "HULL_VETO_MAX_POINTS", len(points) - 1)
     assert np.array_equal(surfels.visible(camera), alone)
     assert HULL_VETO_MAX_POINTS >= 10_000
+
+
+def test_the_hull_test_is_taken_always_or_never_when_asked(monkeypatch):
+    mesh = zo.load_mesh(ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off")
+    points, _ = zo.sample_surface(mesh, 2_048, seed=0)
+    surfels = zo.point_surfels(points)
+    camera = zo.camera_on_sphere(20.0, 60.0)
+    alone = _splats_alone(surfels, camera, monkeypatch)
+    assert np.array_equal(surfels.visible(camera, hull_test=False), alone)
+    monkeypatch.setattr(point_splats, "HULL_VETO_MAX_POINTS", 10)
+    assert np.array_equal(surfels.visible(camera, hull_test=True), hull_veto(points, alone, camera.eye, 0.5 * len(points)))
+    assert np.array_equal(zo.visible_mask_points(points, camera, hull_test=True), surfels.visible(camera, hull_test=True))
+    with pytest.raises(ArgumentTypeError, match="hull_test"):
+        surfels.visible(camera, hull_test=1)

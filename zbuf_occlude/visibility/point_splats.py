@@ -201,7 +201,9 @@ class PointSurfels:
         order = self.order
         return self.points[order], self.normals[order], self.radius[order], self.spacing[order], self.sided[order]
 
-    def visible(self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu") -> NDArray[np.bool_]:
+    def visible(
+        self, camera: Camera, *, tolerance: float = DEFAULT_SPLAT_TOLERANCE, backend: str = "cpu", hull_test: bool | None = None
+    ) -> NDArray[np.bool_]:
         """(N,) bool: the points ``camera`` sees (module docstring), inside its frustum.
 
         Parameters
@@ -220,13 +222,18 @@ class PointSurfels:
             kernels run on numba's threads where allowed
             (:func:`~zbuf_occlude.visibility.point_kernels.threads_for`), with the same masks.
             Either way the hull test (module docstring, step 5) runs on the CPU.
+        hull_test : bool, optional
+            Hand what the splats keep to the hull test (module docstring, step 5): None (the default)
+            where the cloud holds at most :data:`~zbuf_occlude.defaults.HULL_VETO_MAX_POINTS` points,
+            where it pays; True or False always or never.  It about doubles a view's time at 2,048 and
+            10,000 points (docs/results/point_visibility.md).
 
         Raises
         ------
         InvalidInputError
             ``tolerance`` negative or not finite; an unknown ``backend``.
         ArgumentTypeError
-            ``camera`` not a :class:`Camera`, ``tolerance`` not a number.
+            ``camera`` not a :class:`Camera`, ``tolerance`` not a number, ``hull_test`` not None, True or False.
         InsufficientMemoryError
             The view's arrays (:data:`BYTES_PER_VIEW_POINT` a point, ``BYTES_PER_HULL_POINT`` more for the hull test, and its splat image) would need
             more memory than is available (naming the points), checked before any is allocated.
@@ -239,7 +246,7 @@ class PointSurfels:
         tol = check_nonnegative(tolerance, "tolerance")
         splat_surfels = _splatter(backend)
         n = len(self.points)
-        hull = n <= HULL_VETO_MAX_POINTS
+        hull = n <= HULL_VETO_MAX_POINTS if hull_test is None else check_flag(hull_test, "hull_test")
         check_memory(
             n * (BYTES_PER_VIEW_POINT + (BYTES_PER_HULL_POINT if hull else 0)) + MAX_SPLAT_PIXELS * _BYTES_PER_SPLAT_PIXEL,
             f"a view of the splats of {n:,} points",
@@ -390,6 +397,7 @@ def visible_mask_points(
     splat_scale: float = DEFAULT_SPLAT_SCALE,
     tolerance: float = DEFAULT_SPLAT_TOLERANCE,
     backend: str = "cpu",
+    hull_test: bool | None = None,
 ) -> NDArray[np.bool_]:
     """Which points of a bare point cloud the camera sees: HSR without a mesh.
 
@@ -408,7 +416,7 @@ def visible_mask_points(
         Surface normals; estimated from the points when absent.
     oriented, neighbours, splat_scale
         See :func:`point_surfels`.
-    tolerance, backend
+    tolerance, backend, hull_test
         See :meth:`PointSurfels.visible`.
 
     Returns
@@ -432,7 +440,7 @@ def visible_mask_points(
     check_camera(camera)
     surfels = point_surfels(points, normals, oriented=oriented, neighbours=neighbours, splat_scale=splat_scale)
     warn_camera_placement(camera, surfels.points)
-    return surfels.visible(camera, tolerance=tolerance, backend=backend)
+    return surfels.visible(camera, tolerance=tolerance, backend=backend, hull_test=hull_test)
 
 
 @register("point-splat")
