@@ -119,18 +119,18 @@ def test_a_point_at_the_eye_is_kept():
     assert on_flipped_hull(points, np.zeros(3), 100.0)[-1]
 
 
-def _splats_alone(surfels, camera, monkeypatch):
-    with monkeypatch.context() as patch:
-        patch.setattr(point_splats, "HULL_VETO_MAX_POINTS", -1)
-        return surfels.visible(camera)
-
-
-def test_a_view_of_few_enough_points_is_the_splats_veto_and_of_more_the_splats_alone(monkeypatch):
+@pytest.fixture(scope="module")
+def chair_view():
+    """A shipped chair's 2,048 points prepared, one camera, and the splats' answer alone (no hull test)."""
     mesh = zo.load_mesh(ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off")
     points, _ = zo.sample_surface(mesh, 2_048, seed=0)
     surfels = zo.point_surfels(points)
     camera = zo.camera_on_sphere(20.0, 60.0)
-    alone = _splats_alone(surfels, camera, monkeypatch)
+    return points, surfels, camera, surfels.visible(camera, hull_test=False)
+
+
+def test_a_view_of_few_enough_points_is_the_splats_veto_and_of_more_the_splats_alone(chair_view, monkeypatch):
+    points, surfels, camera, alone = chair_view
     expected = hull_veto(points, alone, camera.eye, HULL_RADIUS_FACTOR_PER_POINT * len(points))
     assert np.array_equal(surfels.visible(camera), expected)
     assert np.count_nonzero(alone & ~expected) > 0  # the veto decides something on a chair
@@ -139,14 +139,10 @@ def test_a_view_of_few_enough_points_is_the_splats_veto_and_of_more_the_splats_a
     assert HULL_VETO_MAX_POINTS >= 10_000
 
 
-def test_the_hull_test_is_taken_always_or_never_when_asked(monkeypatch):
-    mesh = zo.load_mesh(ROOT / "data" / "samples" / "chair" / "train" / "chair_0001.off")
-    points, _ = zo.sample_surface(mesh, 2_048, seed=0)
-    surfels = zo.point_surfels(points)
-    camera = zo.camera_on_sphere(20.0, 60.0)
-    alone = _splats_alone(surfels, camera, monkeypatch)
-    assert np.array_equal(surfels.visible(camera, hull_test=False), alone)
-    monkeypatch.setattr(point_splats, "HULL_VETO_MAX_POINTS", 10)
+def test_the_hull_test_is_taken_always_or_never_when_asked(chair_view, monkeypatch):
+    points, surfels, camera, alone = chair_view
+    monkeypatch.setattr(point_splats, "HULL_VETO_MAX_POINTS", -1)
+    assert np.array_equal(surfels.visible(camera), alone)  # hull_test=False is the splats alone
     assert np.array_equal(surfels.visible(camera, hull_test=True), hull_veto(points, alone, camera.eye, 0.5 * len(points)))
     assert np.array_equal(zo.visible_mask_points(points, camera, hull_test=True), surfels.visible(camera, hull_test=True))
     with pytest.raises(ArgumentTypeError, match="hull_test"):
