@@ -36,9 +36,9 @@ BYTES_PER_HULL_POINT = 512
 
 #: Largest share of a view's visible points the veto hides; past it the veto is not taken.  A sheet through
 #: the eye (a sign's plate seen exactly edge-on) flips into a flat hull whose inside holds the sheet's own
-#: points, so HPR hides most of them (0.87 of a view of a sign's points at 2,048; Katz et al. call such
-#: points the silhouette's); splat leaks are a rim band and small parts (at most 0.40 of a view's points on
-#: the tuning meshes at 2,048 and 10,000).
+#: points, so HPR hides most of them (0.87 of what the splats kept of a sign at 2,048 points); splat leaks
+#: are a rim band and small parts (at most 0.40 of what the splats kept in any view of the tuning meshes at
+#: 2,048 and 10,000 points).
 MAX_VETOED_SHARE = 0.5
 #: Fewest points a 3-D hull is taken of: 4 in general position, the viewpoint one of them.
 _MIN_HULL_POINTS = 4

@@ -225,7 +225,7 @@ class PointSurfels:
         hull_test : bool, optional
             Hand what the splats keep to the hull test (module docstring, step 5): None (the default)
             where the cloud holds at most :data:`~zbuf_occlude.defaults.HULL_VETO_MAX_POINTS` points,
-            where it pays; True or False always or never.  It about doubles a view's time at 2,048 and
+            where it pays; True or False always or never.  It makes a view 2-4 times as long at 2,048 and
             10,000 points (docs/results/point_visibility.md).
 
         Raises
