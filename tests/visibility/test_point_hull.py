@@ -30,12 +30,22 @@ def test_law_a_flipped_point_stays_on_its_ray_at_twice_the_radius_less_its_dista
     image = flipped(points, eye, factor)
     p = points - eye
     d = np.linalg.norm(p, axis=1)
-    radius = factor * d.max(initial=0.0)
-    away = d > 1e-9 * max(radius, 1.0)
-    assert np.allclose(np.linalg.norm(image[away], axis=1), 2.0 * radius - d[away], rtol=1e-9, atol=0.0)
-    assert np.allclose(np.cross(image[away], p[away]), 0.0, atol=1e-9 * (radius + 1.0) * (d.max(initial=0.0) + 1.0))
+    unit = d.max(initial=0.0)  # the farthest point's distance: the images' unit of length
+    away = d > 1e-9 * unit
+    assert np.allclose(np.linalg.norm(image[away], axis=1), 2.0 * factor - d[away] / unit, rtol=1e-9, atol=0.0)
+    assert np.allclose(np.cross(image[away], p[away] / unit), 0.0, atol=1e-9 * (factor + 1.0))
     assert np.all(np.einsum("ij,ij->i", image[away], p[away]) > 0.0)  # the same side of the eye
     assert np.array_equal(image[d == 0.0], np.zeros((np.count_nonzero(d == 0.0), 3)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([1e-90, 1e-6, 1e6, 1e90]))
+def test_law_the_hull_test_does_not_depend_on_the_cloud_s_unit(seed, scale):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(300, 3)) * rng.uniform(0.2, 1.0, size=3)
+    eye = np.array([0.0, 0.0, 6.0])
+    visible = rng.random(len(points)) < 0.7
+    assert np.array_equal(hull_veto(points * scale, visible, eye * scale, 150.0), hull_veto(points, visible, eye, 150.0))
 
 
 @settings(max_examples=60, deadline=None)

@@ -46,12 +46,16 @@ _MIN_HULL_POINTS = 4
 
 def flipped(points: NDArray[np.float64], eye: NDArray[np.float64], radius_factor: float) -> NDArray[np.float64]:
     """Katz et al.'s spherical flipping (Eq. 1) of ``points (N, 3) float64`` about ``eye (3,)``, in
-    the frame centred on ``eye``: each point moved along its ray to ``2R − ‖p‖`` from the eye, with
-    ``R = radius_factor · max ‖p‖``.  Points at the eye stay at it."""
+    the frame centred on ``eye`` with the farthest point's distance as its unit (so that the hull sees
+    the same numbers at any scale): each point moved along its ray to ``2R − ‖p‖`` from the eye, with
+    ``R = radius_factor``.  Points at the eye stay at it."""
     p = points - eye
     d = np.sqrt(np.einsum("ij,ij->i", p, p))
-    r = radius_factor * float(d.max(initial=0.0))
-    scale = np.divide(2.0 * r - d, d, out=np.zeros_like(d), where=d > 0.0)
+    farthest = float(d.max(initial=0.0))
+    if not farthest > 0.0:
+        return np.zeros_like(p)
+    p, d = p / farthest, d / farthest
+    scale = np.divide(2.0 * radius_factor - d, d, out=np.zeros_like(d), where=d > 0.0)
     return p * scale[:, None]
 
 
