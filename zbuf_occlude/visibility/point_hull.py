@@ -50,10 +50,12 @@ def flipped(points: NDArray[np.float64], eye: NDArray[np.float64], radius_factor
     the same numbers at any scale): each point moved along its ray to ``2R − ‖p‖`` from the eye, with
     ``R = radius_factor``.  Points at the eye stay at it."""
     p = points - eye
-    d = np.sqrt(np.einsum("ij,ij->i", p, p))
-    farthest = float(d.max(initial=0.0))
-    if not farthest > 0.0:
+    largest = float(np.abs(p).max(initial=0.0))
+    if not largest > 0.0:
         return np.zeros_like(p)
+    p = p / largest  # squares of 1e-160 or 1e200 would under- or overflow
+    d = np.sqrt(np.einsum("ij,ij->i", p, p))
+    farthest = float(d.max())
     p, d = p / farthest, d / farthest
     scale = np.divide(2.0 * radius_factor - d, d, out=np.zeros_like(d), where=d > 0.0)
     return p * scale[:, None]
