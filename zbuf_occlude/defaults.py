@@ -154,7 +154,7 @@ DEFAULT_CREASE_COS = 0.87
 #: has in proportion to its points.
 HULL_RADIUS_FACTOR_PER_POINT = 0.5
 #: Clouds of up to this many points get the hull test: 20,000.  It gains 0.009 of accuracy at 2,048
-#: points and 0.004 at 10,000 on the tuning meshes, for about a view's own time; at 100,000 it gains
+#: points and 0.004 at 10,000 on the tuning meshes, for one to three views' time; at 100,000 it gains
 #: 0.001 for three views' time.
 HULL_VETO_MAX_POINTS = 20_000
 #: Splat pixels across the median splat radius: 3 (the image is sized from the splats, not set).

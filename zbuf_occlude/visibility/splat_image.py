@@ -1,6 +1,6 @@
 """The image a view of splats is rasterised into (:func:`splat_image`), sized from the splats: the part of the
-frustum that holds points, a few pixels across the median splat.  Used by
-:meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible` and both of its rasterisers."""
+frustum that holds points, a few pixels across the median splat.  Made once per view by
+:meth:`~zbuf_occlude.visibility.point_splats.PointSurfels.visible`; either rasteriser fills it."""
 
 from __future__ import annotations
 
