@@ -124,9 +124,16 @@ def repository_files() -> list[str]:
         return [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if p.is_file() and not skip.intersection(p.relative_to(ROOT).parts)]
 
 
+def numba_cache_files() -> list[str]:
+    """The package's compiled kernels in numba's on-disk cache (``__pycache__/*.nbi``, ``*.nbc``), as
+    ``scripts/install.sh``'s warm-up leaves them: a reader runs the examples after the install."""
+    return [p.relative_to(ROOT).as_posix() for p in (ROOT / "zbuf_occlude").rglob("__pycache__/*.nb[ic]")]
+
+
 def fresh_copy(dest: Path) -> Path:
-    """Copy the repository's files into ``dest`` and give it a ``.venv/bin`` that is this Python."""
-    for rel in repository_files():
+    """Copy the repository's files into ``dest``, with the kernels the install compiled (numba finds
+    them by the sources' times, which the copy keeps), and give it a ``.venv/bin`` that is this Python."""
+    for rel in [*repository_files(), *numba_cache_files()]:
         target = dest / rel
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / rel, target)
