@@ -225,7 +225,8 @@ def test_a_camera_inside_the_cloud_sees_only_what_is_in_front_of_it(sphere):
     points, _, _ = sphere
     camera = zo.Camera(eye=[0.0, 0.0, 0.0], target=[1.0, 0.0, 0.0], up=[0.0, 0.0, 1.0], yfov_deg=60.0,
                        width=64, height=64, znear=0.01, zfar=10.0)  # fmt: skip
-    visible = zo.visible_mask_points(points, camera)
+    with pytest.warns(zo.CameraPlacementWarning, match="inside the object's bounding box"):
+        visible = zo.visible_mask_points(points, camera)
     assert visible.shape == (len(points),)
     assert not visible[points[:, 0] <= 0].any()
     # from the centre every point of the sphere in the frustum is visible
