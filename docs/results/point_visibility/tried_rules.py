@@ -12,7 +12,8 @@ over poses.  The rules:
   surface variation (smallest eigenvalue over the trace) exceeds 0.02-0.1.
 * **Rods turned to the camera**: where the 12-neighbourhood is a line (linearity above 0.6, 0.75 or 0.9), the normal
   of each view the direction to the eye without its part along the line.
-* **A vote of the neighbours**: each point takes the majority of its k nearest neighbours' answers (k 5, 9, 15).
+* **A vote of the neighbours**: each point takes the majority answer of its k nearest points, itself among them (k 5, 9
+  and 15: odd, so no vote ties).
 * **A learned fusion**: logistic regression (scikit-learn) on the splats' answer with and without the hull test,
   HPR's (:func:`~zbuf_occlude.visibility.point_hull.on_flipped_hull` of the whole cloud at 100 farthest distances), and
   the share of the 11 nearest neighbours that each of the splats and HPR sees; fitted on the tuning meshes' point-views,
@@ -40,6 +41,7 @@ from accuracy_point_visibility import Procedural, mesh_sets  # noqa: E402
 
 HPR_FACTOR = 100.0
 NEIGHBOURS = 12
+VOTES = (5, 9, 15)
 
 
 def covariance_shape(points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -60,7 +62,8 @@ def measure(path, n: int, cameras: list[zo.Camera]) -> dict:
     faces = mesh.face_normals[face_index]
     truth = [zo.visible_mask(mesh, points, c, method="oracle", face_index=face_index) for c in cameras]
     surfels = zo.point_surfels(points)
-    _, idx = cKDTree(points).query(points, k=NEIGHBOURS)
+    _, nearest = cKDTree(points).query(points, k=max(NEIGHBOURS, *VOTES))  # each point first
+    idx = nearest[:, :NEIGHBOURS]
     variation, linearity, line = covariance_shape(points, idx)
     splat = [surfels.visible(c) for c in cameras]
     row = {"splats": accuracy(splat, truth)}
@@ -86,9 +89,8 @@ def measure(path, n: int, cameras: list[zo.Camera]) -> dict:
             turned = dataclasses.replace(surfels, normals=np.where((linearity > straight)[:, None], facing, surfels.normals))
             masks.append(turned.visible(c))
         row[f"rods turned to the camera, linearity > {straight}"] = accuracy(masks, truth)
-    for k in (5, 9, 15):
-        votes = [m[idx[:, :k]].mean(axis=1) for m in splat]
-        row[f"vote of {k} neighbours"] = accuracy([np.where(v == 0.5, m, v > 0.5) for v, m in zip(votes, splat)], truth)
+    for k in VOTES:
+        row[f"vote of {k} neighbours"] = accuracy([m[nearest[:, :k]].mean(axis=1) > 0.5 for m in splat], truth)
     bare = [surfels.visible(c, hull_test=False) for c in cameras]
     hpr = [on_flipped_hull(points, c.eye, HPR_FACTOR) for c in cameras]
     features = [np.column_stack([s, b, h, s[idx[:, 1:]].mean(axis=1), h[idx[:, 1:]].mean(axis=1)]) for s, b, h in zip(splat, bare, hpr)]
