@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.cli.main import main
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.mesh.families import FAMILIES, family_rng, get_family, write_family
-from zbuf_occlude.mesh.families.parts import LEAF_SIDE_M, assemble, open_tube
+from zbuf_occlude.mesh.families.parts import assemble, open_tube
 from zbuf_occlude.mesh.families.shrub import unit_shrub
 from zbuf_occlude.mesh.families.trunk import unit_trunk
 
@@ -142,10 +142,10 @@ def test_a_shrub_is_as_tall_as_drawn_and_about_as_wide(seed: int) -> None:
 @given(seed=SEEDS)
 def test_a_hedge_fills_its_drawn_envelope_and_no_more(seed: int) -> None:
     _, pieces, p, mesh = drawn("hedge", seed)
-    v, leaf = used(mesh), LEAF_SIDE_M / np.sqrt(2.0)  # a ball's centre stands a radius inside; a leaf's corner half its diagonal out
-    reach = 0.5 * np.array([p["length_m"], p["thickness_m"]]) + leaf
+    v, r = used(mesh), p["cluster_m"]
+    reach = 0.5 * np.array([p["length_m"], p["thickness_m"]]) + 0.15 * r  # a centre stands a radius inside, a vertex 1.15 radii out
     assert np.all(np.abs(v[:, :2]) <= reach + 1e-9)
-    assert v[:, 2].min() == pytest.approx(0.0, abs=1e-12) and v[:, 2].max() <= p["height_m"] + 2 * leaf + 1e-9  # lifted or lowered
+    assert v[:, 2].min() == pytest.approx(0.0, abs=1e-12) and v[:, 2].max() <= p["height_m"] + 0.3 * r + 1e-9
     assert len(pieces["foliage"]) == p["clusters"] and p["length_m"] == pytest.approx(p["length_ratio"] * p["height_m"])
 
 

@@ -12,8 +12,7 @@ from hypothesis import strategies as st
 
 import zbuf_occlude.sensors.scene.foliage as foliage
 from zbuf_occlude.errors import InvalidInputError
-from zbuf_occlude.mesh.leaves import leaf_quads
-from zbuf_occlude.sensors.scene.foliage import add_foliage, crown_region_volume, in_metres
+from zbuf_occlude.sensors.scene.foliage import add_foliage, crown_region_volume, in_metres, leaf_quads
 
 
 def _leaves(mesh: trimesh.Trimesh, grown: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:

@@ -2,9 +2,10 @@
 
 A hedge is a line of closely set shrubs grown into one mass.  A street scan's segmentation cuts a run
 into pieces a few metres long, so a segment, not the whole run, is one object.  Its foliage is
-balls of leaves (:func:`~zbuf_occlude.mesh.families.parts.leaf_ball`: a turbid medium that a beam may cross whole)
-filling the segment's envelope, as :mod:`~zbuf_occlude.mesh.families.shrub` fills a shrub's; a shrub is as long as it
-is broad, a hedge :data:`RANGES` ``length_ratio`` times as long as it is tall.
+:func:`~zbuf_occlude.mesh.families.parts.leaf_cluster` icospheres (open: 30 % of each cluster's faces
+removed, so that a beam through an outer gap returns from the foliage behind it) filling the segment's
+envelope, as :mod:`~zbuf_occlude.mesh.families.shrub` fills a shrub's; a shrub is as long as it is broad,
+a hedge :data:`RANGES` ``length_ratio`` times as long as it is tall.
 
 Ranges
 ------
@@ -20,10 +21,6 @@ Ranges
   parked car, the object a segmentation most often cuts a roadside run against.
 * ``cluster_ratio`` (a leaf cluster's radius over the smaller of the thickness and the height)
   0.25-0.4, as the shrub's clusters are to its height.
-* ``leaf_area_density`` 4 m²/m³ in each cluster's ball (:data:`LEAF_AREA_DENSITY`): no published figure; as the
-  shrub's, the density at which HDL-32E crops of these hedges break their scan lines as LiDARNet's fit-half bush crops
-  do (outline share 0.26 against the real 0.265; 3.5 gave 0.29).  Denser than a shrub's: a hedge is thinner, so a beam
-  crosses less of it.
 """
 
 from __future__ import annotations
@@ -32,22 +29,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from zbuf_occlude.mesh.families.parts import assemble, leaf_ball
+from zbuf_occlude.mesh.families.parts import assemble, leaf_cluster
 
 if TYPE_CHECKING:
     import trimesh  # imported where used: a parser that lists the families loads no trimesh
 
-__all__ = ["CLASS_NAME", "LEAF_AREA_DENSITY", "NAME", "OPEN_PARTS", "RANGES", "make", "parts"]
+__all__ = ["CLASS_NAME", "NAME", "OPEN_PARTS", "RANGES", "make", "parts"]
 
 NAME = "hedge"
 CLASS_NAME = "bush"
 #: Drawn parameters and their ranges (module docstring for the sources).
 RANGES = {"height_m": (0.5, 2.5), "thickness_ratio": (0.5, 1.0), "length_ratio": (1.2, 2.0), "cluster_ratio": (0.25, 0.4)}
-#: The foliage is open: leaves.
+#: The foliage is open: its clusters have gaps.
 OPEN_PARTS = frozenset({"foliage"})
-#: One-sided leaf area per volume of a cluster's ball, m²/m³ (:func:`~zbuf_occlude.mesh.families.parts.leaf_ball`;
-#: module docstring).
-LEAF_AREA_DENSITY = 4.0
 #: Leaf clusters' summed volume over the envelope's (before they overlap), and the fewest and most clusters.
 FILL, CLUSTERS = 0.8, (8, 150)
 
@@ -73,8 +67,8 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
     for k, (axis, side) in enumerate(((2, -1), (2, 1), (0, -1), (0, 1))):  # the bottom, the top and the two ends reached
         centres[k, axis] = side * half[axis]
     centres[:, 2] += 0.5 * size[2]
-    clusters = [leaf_ball(rng, c, r, LEAF_AREA_DENSITY) for c in centres]
-    bottom = min(float(m.bounds[0, 2]) for m in clusters)  # the lowest leaf stands on the ground
+    clusters = [leaf_cluster(rng, c, r) for c in centres]
+    bottom = min(float(m.bounds[0, 2]) for m in clusters)  # the lowest leaf (of a face kept) stands on the ground
     for m in clusters:
         m.apply_translation([0.0, 0.0, -bottom])
     return {"foliage": clusters}, {
@@ -83,7 +77,6 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
         "thickness_m": float(size[1]),
         "cluster_m": float(r),
         "clusters": count,
-        "leaf_area_density": LEAF_AREA_DENSITY,
     }
 
 

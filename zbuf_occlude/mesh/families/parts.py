@@ -2,7 +2,7 @@
 
 Every part is a :class:`trimesh.Trimesh` in the object frame (z up, metres, the ground at z = 0).
 Closed parts (:func:`rod`, :func:`frustum`, :func:`plate`) are watertight on their own; the open
-ones say so (:func:`open_tube`, :func:`leaf_cluster`, :func:`leaf_ball`).  :func:`assemble` concatenates a family's
+ones say so (:func:`open_tube`, :func:`leaf_cluster`).  :func:`assemble` concatenates a family's
 named parts in order, without merging vertices, so each part keeps its own closure.
 """
 
@@ -18,8 +18,7 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:
     import trimesh  # imported where used: a parser that lists the families loads no trimesh
 
-__all__ = ["assemble", "capsule", "ellipsoid", "frustum", "leaf_ball", "leaf_cluster", "open_tube", "plate", "rod", "LEAF_GAP",
-           "LEAF_SIDE_M"]  # fmt: skip
+__all__ = ["assemble", "capsule", "ellipsoid", "frustum", "leaf_cluster", "open_tube", "plate", "rod", "LEAF_GAP"]
 
 #: Share of a leaf cluster's faces removed, so that a beam through an outer gap returns from the
 #: foliage behind it, as in a real crown (the shrub recipe of the sim-to-real runs).
@@ -28,9 +27,6 @@ LEAF_GAP = 0.3
 LEAF_JITTER = (0.85, 1.15)
 #: Icosphere subdivisions of a leaf cluster (320 faces before the gaps).
 LEAF_SUBDIVISIONS = 2
-#: Side of a square leaf of :func:`leaf_ball`, metres: a broadleaf's size, about the HDL-32E's beam footprint at 10-20 m, so
-#: that a leaf covers part of a footprint or all of it.
-LEAF_SIDE_M = 0.08
 #: Sections around a rod or a column: enough for a round silhouette at scanner resolutions.
 ROUND_SECTIONS = 16
 
@@ -123,28 +119,6 @@ def leaf_cluster(rng: np.random.Generator, centre: ArrayLike, radius: float) -> 
     v = s.vertices * rng.uniform(*LEAF_JITTER, (len(s.vertices), 1)) + centre
     keep = rng.random(len(s.faces)) >= LEAF_GAP
     return trimesh.Trimesh(v, s.faces[keep], process=False)
-
-
-def leaf_ball(rng: np.random.Generator, centre: ArrayLike, radius: float, leaf_area_density: float) -> trimesh.Trimesh:
-    """A clump of foliage as leaves: square leaves of side :data:`LEAF_SIDE_M` whose centres are uniform in the ball of
-    ``radius`` metres about ``centre`` (3,), as many as give it ``leaf_area_density`` (one-sided leaf area per volume,
-    m²/m³; at least one), their normals uniform on the sphere (:mod:`zbuf_occlude.mesh.leaves`).
-
-    A beam crosses such a clump as it crosses a turbid medium, passing a depth ``L`` of it with probability about
-    ``exp(−0.5 · LAD · L)``: through its gaps a scanner sees leaves at every depth, or the other side, where the
-    faces of a :func:`leaf_cluster` return only from its shell.  Overlapping balls add their leaves.
-
-    Draws from ``rng``: three numbers per leaf for its centre, three for its normal, one for its turn.
-    """
-    import trimesh
-
-    from zbuf_occlude.mesh.leaves import leaf_quads, spherical_normals
-
-    n = max(1, round(leaf_area_density * (4.0 / 3.0) * np.pi * radius**3 / LEAF_SIDE_M**2))
-    direction = spherical_normals(n, rng)
-    centres = np.asarray(centre, np.float64) + direction * (radius * rng.uniform(size=(n, 1)) ** (1.0 / 3.0))
-    vertices, faces = leaf_quads(centres, spherical_normals(n, rng), LEAF_SIDE_M, rng)
-    return trimesh.Trimesh(vertices, faces, process=False)
 
 
 def assemble(parts: Mapping[str, Sequence[trimesh.Trimesh]]) -> trimesh.Trimesh:

@@ -32,7 +32,6 @@ from numpy.typing import NDArray
 
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.io.file_errors import value_kind
-from zbuf_occlude.mesh.leaves import leaf_quads, spherical_normals
 from zbuf_occlude.sensors.checks import count, mapping, real
 
 if TYPE_CHECKING:
@@ -47,6 +46,7 @@ __all__ = [
     "add_foliage",
     "crown_region_volume",
     "in_metres",
+    "leaf_quads",
 ]
 
 #: Most leaves one call adds (two triangles each): a crown asking for more is refused, naming the count.
@@ -158,6 +158,31 @@ def crown_region_volume(mesh: trimesh.Trimesh, *, shell_m: float = 1.0, seed: in
 def _volume(region: _CrownRegion, rng: np.random.Generator) -> float:
     box = float(np.prod(region.hi - region.lo))
     return box * float(region.contains(region.uniform(_VOLUME_SAMPLES, rng)).mean())
+
+
+def leaf_quads(centres: NDArray, normals: NDArray, side_m: float, rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+    """Square leaves: ``centres (N, 3)`` and unit ``normals (N, 3)`` float64, side ``side_m`` metres, each turned
+    by a uniform angle about its normal.
+
+    Returns
+    -------
+    vertices : (4N, 3) float64
+        Four corners a leaf, in order around it.
+    faces : (2N, 3) int64
+        Two triangles a leaf, wound counter-clockwise seen from its normal.
+    """
+    n = len(centres)
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(normals, u)
+    turn = rng.uniform(0.0, 2.0 * math.pi, (n, 1))
+    a, b = np.cos(turn) * u + np.sin(turn) * v, -np.sin(turn) * u + np.cos(turn) * v
+    h = side_m / 2.0
+    corners = np.stack([centres - h * a - h * b, centres + h * a - h * b, centres + h * a + h * b, centres - h * a + h * b], axis=1)
+    base = 4 * np.arange(n, dtype=np.int64)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]]).reshape(2, n, 3).transpose(1, 0, 2).reshape(-1, 3)
+    return corners.reshape(-1, 3), faces
 
 
 @dataclass(frozen=True)
@@ -284,7 +309,9 @@ def add_foliage(mesh: trimesh.Trimesh, *, leaf_area_density: float, leaf_side_m:
         parts.append(draw[region.contains(draw)])
         found += len(parts[-1])
     centres = np.concatenate(parts)[:n] if parts else np.zeros((0, 3))
-    vertices, faces = leaf_quads(centres, spherical_normals(n, rng), side, rng)
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    vertices, faces = leaf_quads(centres, normals, side, rng)
     if not keep_surface:
         return trimesh.Trimesh(vertices, faces, process=False)
     base = np.asarray(mesh.vertices, np.float64)
