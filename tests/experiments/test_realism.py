@@ -486,6 +486,37 @@ def test_class_summary_by_range_gives_the_count_exponent_and_the_table_shows_it(
     assert "count exponent" not in class_table(plain)
 
 
+def _standing_figure(leg_m: float, shoulder_m: float, range_m: float = 8.0) -> np.ndarray:
+    """A figure 1.6 m tall, 8 m in front of the sensor (+x), as 16 rows of points across the line of sight (y):
+    the lower half ``leg_m`` wide, the upper half ``shoulder_m``, 1 cm apart."""
+    rows = []
+    for z in np.linspace(-1.8, -0.2, 16):
+        w = leg_m if z < -1.0 else shoulder_m
+        y = np.arange(-0.5 * w, 0.5 * w + 1e-9, 0.01)
+        rows.append(np.column_stack([np.full_like(y, range_m), y, np.full_like(y, z)]))
+    return np.vstack(rows)
+
+
+def test_class_summary_by_range_gives_the_median_width_per_eighth_of_the_height() -> None:
+    """Legs half as wide as the shoulders show as eighths half as wide as the top ones; the class's profile is the
+    median over its crops of each crop's, and the Markdown table and the CSV rows carry it."""
+    from zbuf_occlude.experiments.realism import ObjectCloud, _class_rows, class_summary, class_table, compare_classes
+    from zbuf_occlude.sensors.fit import width_profile
+
+    clouds = [ObjectCloud(_standing_figure(leg, 0.5), "pedestrian", f"p{k}") for k, leg in enumerate((0.2, 0.25, 0.3))]
+    profile = class_summary(clouds, by_range=True)["width_profile"]
+    assert profile.shape == (8,)
+    assert profile[:4] / profile[4:] == pytest.approx(np.full(4, 0.5), abs=0.03)  # the median crop's legs: 0.25 of 0.5
+    assert profile == pytest.approx(np.median([width_profile(c.points_m) for c in clouds], axis=0))
+    assert "width_profile" not in class_summary(clouds)  # no sensor frame, no line of sight
+    _, table = compare_classes(clouds, clouds, by_range=True)
+    assert "median width per eighth of the height" in class_table(table)
+    assert " ".join(f"{v:.2f}" for v in profile) in class_table(table)
+    row = _class_rows(table)[0]
+    assert [row[f"relative_width_{b / 8:g}_{(b + 1) / 8:g}"] for b in range(8)] == pytest.approx(profile.tolist())
+    assert "width_profile" not in row
+
+
 def test_break_depths_are_the_range_steps_across_the_breaks_of_known_runs() -> None:
     from zbuf_occlude.experiments.realism_stats import break_depths_m
 

@@ -235,6 +235,30 @@ def test_a_pedestrian_is_as_tall_as_drawn_with_its_limbs_and_what_it_carries(see
         assert np.ptp(feet[:, 0]) > PROPORTIONS["foot_length"] * h
 
 
+@FEW
+@given(seed=SEEDS)
+def test_a_pedestrians_feet_stand_a_step_width_apart_closer_than_the_hips(seed: int) -> None:
+    """Across the walk (y) the feet's centres lie the drawn step width apart, each leg straight from its hip
+    joint (0.055 H x build from the midline) to its ankle; a walker's step width (Donelan et al. 2001:
+    0.08-0.16 of the leg length) is narrower than its hips."""
+    from zbuf_occlude.mesh.families.pedestrian import PROPORTIONS, STANDING_STEP_WIDTH_M, WALKING_STEP_WIDTH
+
+    _, pieces, p, _ = drawn("pedestrian", seed)
+    centres = sorted(float(np.mean(used(m)[:, 1])) for m in pieces["foot"])
+    assert centres[1] - centres[0] == pytest.approx(p["step_width_m"], abs=1e-9)
+    assert centres[0] == pytest.approx(-centres[1], abs=1e-9)
+    hips = 2 * 0.055 * p["height_m"] * p["build"]
+    if p["stride_deg"] >= 3:  # walking
+        leg = PROPORTIONS["hip_z"] * p["height_m"]
+        assert WALKING_STEP_WIDTH[0] * leg <= p["step_width_m"] <= WALKING_STEP_WIDTH[1] * leg < hips
+    else:
+        assert STANDING_STEP_WIDTH_M[0] <= p["step_width_m"] <= STANDING_STEP_WIDTH_M[1]
+    for upper, lower in (pieces["leg"][0:2], pieces["leg"][2:4]):  # the knee between hip and ankle across the walk
+        top, bottom = used(upper), used(lower)
+        assert np.ptp(top[:, 1]) <= 2 * 0.045 * p["height_m"] * p["build"] + 0.5 * abs(hips - p["step_width_m"]) + 1e-9
+        assert np.ptp(bottom[:, 1]) <= 2 * 0.030 * p["height_m"] * p["build"] + 0.5 * abs(hips - p["step_width_m"]) + 1e-9
+
+
 def test_pedestrians_stand_and_walk_and_carry_in_their_shares() -> None:
     drawn_ = [FAMILIES["pedestrian"].parts(family_rng("pedestrian", 0, k))[1] for k in range(400)]
     standing = np.mean([p["stride_deg"] < 3 for p in drawn_])

@@ -185,12 +185,14 @@ def _bin_names(bins_m: tuple[float, ...] = RANGE_BINS_M) -> list[str]:
 def class_table(table: dict[str, dict[str, dict]]) -> str:
     """:func:`compare_classes`' table as Markdown: one row per class and set, the height profile in percent, bottom to top;
     with summaries by range (:func:`class_summary`), the median points per crop in each range bin (crops in it),
-    the count exponent and the median outline share after it."""
+    the count exponent, the median outline share and the median width per eighth of the height over the crop's
+    width, bottom to top, after it."""
     by_range = any("n_points_by_range" in st for sets in table.values() for st in sets.values())
     head = ["class", "set", "crops", "median points", "median height, m", "median width, m", "median height / width",
             "median plan elongation", "median normalised height", "% of points per tenth of the height, bottom to top"]  # fmt: skip
     if by_range:
-        head += [f"median points at {b} m (crops)" for b in _bin_names()] + ["count exponent", "median outline share"]
+        widths = "median width per eighth of the height / the crop's, bottom to top"
+        head += [f"median points at {b} m (crops)" for b in _bin_names()] + ["count exponent", "median outline share", widths]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for k, sets in table.items():
         for name, st in sets.items():
@@ -199,17 +201,19 @@ def class_table(table: dict[str, dict[str, dict]]) -> str:
                                                                            "plan_elongation", "median_normalised_height")), profile]  # fmt: skip
             if by_range:
                 cells += [f"{_fmt(m)} ({c})" for m, c in zip(st["n_points_by_range"], st["crops_by_range"])]
-                cells += [_fmt(st["count_exponent"]), _fmt(st["outline_share"])]
+                cells += [_fmt(st["count_exponent"]), _fmt(st["outline_share"]), " ".join(f"{v:.2f}" for v in st["width_profile"])]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
 def _class_rows(table: dict[str, dict[str, dict]]) -> list[dict]:
-    """:func:`compare_classes`' table as CSV rows: class, set, the medians and one column per tenth of the height."""
-    arrays = ("height_shares", "n_points_by_range", "crops_by_range")
+    """:func:`compare_classes`' table as CSV rows: class, set, the medians, one column per tenth of the height and,
+    by range, per range bin and per eighth of the height (``relative_width_0_0.125``, ...: the width profile)."""
+    arrays = ("height_shares", "n_points_by_range", "crops_by_range", "width_profile")
     return [{"class": k, "set": name, **{key: v for key, v in st.items() if key not in arrays},
              **{f"share_{b / HEIGHT_BINS:g}_{(b + 1) / HEIGHT_BINS:g}": float(v) for b, v in enumerate(st["height_shares"])},
-             **{f"{key}_{b}_m": v.item() for key in arrays[1:] if key in st for b, v in zip(_bin_names(), st[key])}}
+             **{f"{key}_{b}_m": v.item() for key in arrays[1:3] if key in st for b, v in zip(_bin_names(), st[key])},
+             **{f"relative_width_{b / len(w):g}_{(b + 1) / len(w):g}": float(v) for w in [st.get("width_profile", ())] for b, v in enumerate(w)}}
             for k, sets in table.items() for name, st in sets.items()]  # fmt: skip
 
 

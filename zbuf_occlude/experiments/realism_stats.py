@@ -30,7 +30,9 @@ and how its points spread over the height, each point's height above the crop's 
 crop's height (0 at the bottom, 1 at the top): its median, and the share of points in each tenth
 of the height.  :func:`class_summary` takes their medians over a class's crops, and for clouds in
 a sensor frame also the median points per crop in range bins (:data:`RANGE_BINS_M`), the count
-exponent over the crops and the median outline share.
+exponent over the crops, the median outline share and the median width profile (how wide each eighth of the
+height shows across the line of sight over the crop's width: :func:`zbuf_occlude.sensors.fit.width_profile`; a
+person narrow at the knees and widest at the shoulders, a trunk about 1 throughout).
 
 :mod:`zbuf_occlude.experiments.realism` reads the sets and compares them with these statistics.
 """
@@ -43,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.sensors.fit import across_sight_width
+from zbuf_occlude.sensors.fit import across_sight_width, width_profile
 from zbuf_occlude.sensors.fit.scan_lines import (
     OUTLINE_GAP_FACTOR,
     RING_GAP_DEG,
@@ -222,7 +224,9 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
         ``by_range`` also ``range_m`` (median distance to the centroid, metres),
         ``n_points_by_range`` and ``crops_by_range`` (:func:`range_bin_medians`, ``(B,)``),
         ``count_exponent`` (:func:`fit_count_exponent` over the crops; NaN for fewer than three
-        or one range) and ``outline_share`` (the median of :func:`outline_share`).
+        or one range), ``outline_share`` (the median of :func:`outline_share`) and ``width_profile``,
+        ``(WIDTH_PROFILE_BINS,) float64``: per eighth of the height, bottom to top, the median over the crops of
+        :func:`zbuf_occlude.sensors.fit.width_profile` (NaN where no crop shows that eighth two returns wide).
     """
     stats = [shape_stats(c.points_m) for c in clouds]
     summary = {"crops": len(stats)}
@@ -236,5 +240,8 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
         summary["range_m"] = float(np.median(ranges))
         summary["n_points_by_range"], summary["crops_by_range"] = range_bin_medians(ranges, counts, bins_m)
         summary["count_exponent"] = fit_count_exponent(ranges, counts)[0]
-        summary["outline_share"] = float(np.nanmedian([outline_share(sensor_points(c.points_m, f"{c.source}: points")) for c in clouds]))
+        points = [sensor_points(c.points_m, f"{c.source}: points") for c in clouds]
+        summary["outline_share"] = float(np.nanmedian([outline_share(p) for p in points]))
+        widths = np.array([width_profile(p) for p in points])
+        summary["width_profile"] = np.array([np.nanmedian(w) if np.isfinite(w).any() else math.nan for w in widths.T])
     return summary
