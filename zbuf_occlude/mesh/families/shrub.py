@@ -10,12 +10,6 @@ Ranges
 * ``height_m`` 0.5-3.0 m: typical shrubs and hedges (woody plants below tree size); the real bushes
   of the sim-to-real fit half are about as wide as tall (width/height 0.97-1.48, 10th-90th percentile).
 * ``aspect`` (horizontal extent over height) 1.0-1.6.
-* ``base_cut`` 0-0.3: the share of the blob's height below the ground line.  A shrub of a street or a
-  garden keeps its foliage down to the ground, its base as wide as its middle (hedges and shrubs are
-  trimmed wider at the base than at the top, so that the lower branches keep their light: the Royal
-  Horticultural Society's advice, "Hedges: trimming"); the crops of real bushes are as wide in the lowest
-  eighth of their height as over all of it (LiDARNet v2's fit half: 1.00 in the median), where a blob of
-  round clusters standing on its lowest point shows 0.70.
 """
 
 from __future__ import annotations
@@ -34,7 +28,7 @@ __all__ = ["CLASS_NAME", "NAME", "OPEN_PARTS", "RANGES", "make", "parts", "unit_
 NAME = "shrub"
 CLASS_NAME = "bush"
 #: Drawn parameters and their ranges (module docstring for the sources).
-RANGES = {"height_m": (0.5, 3.0), "aspect": (1.0, 1.6), "base_cut": (0.0, 0.3)}
+RANGES = {"height_m": (0.5, 3.0), "aspect": (1.0, 1.6)}
 #: The foliage is open: its clusters have gaps.
 OPEN_PARTS = frozenset({"foliage"})
 
@@ -61,30 +55,19 @@ def unit_shrub(rng: np.random.Generator) -> trimesh.Trimesh:
 
 
 def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], dict[str, Any]]:
-    """A shrub in real size: the unit shrub with its lowest ``base_cut`` of the height below the ground line (the
-    faces wholly below it dropped, the vertices below it of the faces that cross it raised onto it: the foliage
-    meets the ground), scaled to a drawn height (metres, z up, on z = 0).
+    """A shrub in real size: the unit shrub scaled to a drawn height (metres, z up, on z = 0).
 
     Returns
     -------
     parts : dict
         ``"foliage"``: one open mesh.
     params : dict
-        ``height_m``, ``base_cut``, ``aspect``, ``clusters``.
+        ``height_m``, ``aspect``, ``clusters``.
     """
-    import trimesh
-
     m, params = unit_parts(rng)
     height = float(rng.uniform(*RANGES["height_m"]))
-    cut = float(rng.uniform(*RANGES["base_cut"]))
-    if cut > 0:
-        ground = cut * m.extents[2]
-        below = m.vertices[:, 2] < ground
-        faces = m.faces[~below[m.faces].all(axis=1)]
-        vertices = np.column_stack([m.vertices[:, :2], np.maximum(m.vertices[:, 2], ground) - ground])
-        m = trimesh.Trimesh(vertices, faces, process=False)
     m.apply_scale(height / m.extents[2])
-    return {"foliage": [m]}, {"height_m": height, "base_cut": cut, **params}
+    return {"foliage": [m]}, {"height_m": height, **params}
 
 
 def make(rng: np.random.Generator) -> tuple[trimesh.Trimesh, dict[str, Any]]:
