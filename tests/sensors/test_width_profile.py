@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
-from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, width_profile
+from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, median_width_profile, width_profile
 from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.scene.object_shapes import FACE_ROWS, width_profile_factors
@@ -80,6 +80,19 @@ def test_fit_crop_width_profile_is_the_median_per_bin() -> None:
     with pytest.raises(InvalidInputError, match="at least 3"):
         fit_crop_width_profile(clouds[:2] + [np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 1.0]])], n_bins=4)
     assert crop_placement_json(clouds[:3], ["a"] * 3)["across_sight_profile"]["a"] == pytest.approx(fit_crop_width_profile(clouds[:3]))
+
+
+def test_median_width_profile_is_the_median_per_bin_and_nan_where_no_scan_fills_it() -> None:
+    """The same medians as the fit's, with no minimum of scans and NaN (not 1) where no scan fills a bin."""
+    clouds = [_stack([0.2 * f, 0.4, 0.4, 0.8 * g]) for f, g in ((1, 1), (2, 1), (3, 2), (1, 3))]
+    np.testing.assert_allclose(median_width_profile(clouds, n_bins=4), [0.75, 1.0, 1.0, 2.6])
+    holes = [np.vstack([c[:10], c[-10:]]) for c in clouds]  # the bottom and top bins only
+    got = median_width_profile(holes, n_bins=4)
+    assert np.isnan(got[1:3]).all() and np.isfinite(got[[0, 3]]).all()
+    np.testing.assert_allclose(median_width_profile(clouds[:1], n_bins=4), width_profile(clouds[0], n_bins=4))
+    assert median_width_profile([], n_bins=3).shape == (3,) and np.isnan(median_width_profile([], n_bins=3)).all()
+    with pytest.raises(InvalidInputError, match="n_bins"):
+        median_width_profile(clouds, n_bins=1)
 
 
 @settings(max_examples=40, deadline=None)

@@ -209,12 +209,19 @@ def class_table(table: dict[str, dict[str, dict]]) -> str:
 def _class_rows(table: dict[str, dict[str, dict]]) -> list[dict]:
     """:func:`compare_classes`' table as CSV rows: class, set, the medians, one column per tenth of the height and,
     by range, per range bin and per eighth of the height (``relative_width_0_0.125``, ...: the width profile)."""
-    arrays = ("height_shares", "n_points_by_range", "crops_by_range", "width_profile")
+    by_range = ("n_points_by_range", "crops_by_range")
+    arrays = ("height_shares", *by_range, "width_profile")
     return [{"class": k, "set": name, **{key: v for key, v in st.items() if key not in arrays},
-             **{f"share_{b / HEIGHT_BINS:g}_{(b + 1) / HEIGHT_BINS:g}": float(v) for b, v in enumerate(st["height_shares"])},
-             **{f"{key}_{b}_m": v.item() for key in arrays[1:3] if key in st for b, v in zip(_bin_names(), st[key])},
-             **{f"relative_width_{b / len(w):g}_{(b + 1) / len(w):g}": float(v) for w in [st.get("width_profile", ())] for b, v in enumerate(w)}}
+             **_fraction_columns("share", st["height_shares"]),
+             **{f"{key}_{b}_m": v.item() for key in by_range if key in st for b, v in zip(_bin_names(), st[key])},
+             **_fraction_columns("relative_width", st.get("width_profile", ()))}
             for k, sets in table.items() for name, st in sets.items()]  # fmt: skip
+
+
+def _fraction_columns(name: str, values) -> dict[str, float]:
+    """``{f"{name}_{lo}_{hi}": value}``, one column per equal fraction of the height, bottom to top (``share_0_0.1``)."""
+    n = len(values)
+    return {f"{name}_{b / n:g}_{(b + 1) / n:g}": float(v) for b, v in enumerate(values)}
 
 
 def _summary(stats: list[dict]) -> dict:

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from zbuf_occlude.sensors.fit import across_sight_width, width_profile
+from zbuf_occlude.sensors.fit import across_sight_width, median_width_profile
 from zbuf_occlude.sensors.fit.scan_lines import (
     OUTLINE_GAP_FACTOR,
     RING_GAP_DEG,
@@ -226,7 +226,8 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
         ``count_exponent`` (:func:`fit_count_exponent` over the crops; NaN for fewer than three
         or one range), ``outline_share`` (the median of :func:`outline_share`) and ``width_profile``,
         ``(WIDTH_PROFILE_BINS,) float64``: per eighth of the height, bottom to top, the median over the crops of
-        :func:`zbuf_occlude.sensors.fit.width_profile` (NaN where no crop shows that eighth two returns wide).
+        their width profiles (:func:`zbuf_occlude.sensors.fit.median_width_profile`; NaN where no crop shows that
+        eighth two returns wide).
     """
     stats = [shape_stats(c.points_m) for c in clouds]
     summary = {"crops": len(stats)}
@@ -242,6 +243,5 @@ def class_summary(clouds: list[ObjectCloud], *, by_range: bool = False, bins_m: 
         summary["count_exponent"] = fit_count_exponent(ranges, counts)[0]
         points = [sensor_points(c.points_m, f"{c.source}: points") for c in clouds]
         summary["outline_share"] = float(np.nanmedian([outline_share(p) for p in points]))
-        widths = np.array([width_profile(p) for p in points])
-        summary["width_profile"] = np.array([np.nanmedian(w) if np.isfinite(w).any() else math.nan for w in widths.T])
+        summary["width_profile"] = median_width_profile(points)
     return summary

@@ -123,9 +123,9 @@ def parts(rng: np.random.Generator) -> tuple[dict[str, list[trimesh.Trimesh]], d
         knee = hip + (f["hip_z"] - f["knee_z"]) * h * _direction(hip_angle)
         ankle = knee + (f["knee_z"] - f["ankle_z"]) * h * _direction(hip_angle - knee_flex)
         # seen from the front the leg is straight, from the hip joint to an ankle half a step width out
-        inward = side * 0.5 * p["step_width_m"] - hip[1]
-        knee[1] += inward * (f["hip_z"] - f["knee_z"]) / (f["hip_z"] - f["ankle_z"])
-        ankle[1] += inward
+        across = side * 0.5 * p["step_width_m"] - hip[1]
+        knee[1] += across * (f["hip_z"] - f["knee_z"]) / (f["hip_z"] - f["ankle_z"])
+        ankle[1] += across
         legs += [capsule(hip, knee, r["thigh"]), capsule(knee, ankle, r["shank"])]
         foot_h = f["ankle_z"] * h
         feet.append(plate((f["foot_length"] * h, f["foot_width"] * h * b, foot_h),

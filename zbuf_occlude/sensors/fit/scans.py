@@ -25,8 +25,8 @@ from zbuf_occlude.sensors.fit.lidar import _checked_scan
 
 __all__ = [
     "across_sight_width", "crop_placement_json", "DISTANCE_QUANTILES", "fit_crop_bottoms", "fit_crop_distances",
-    "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_sensor_height", "MIN_PLACEMENT_SCANS",
-    "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "width_profile", "WIDTH_PROFILE_BINS",
+    "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_sensor_height", "median_width_profile",
+    "MIN_PLACEMENT_SCANS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "width_profile", "WIDTH_PROFILE_BINS",
 ]  # fmt: skip
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
 MIN_PLACEMENT_SCANS = 3
@@ -338,11 +338,43 @@ def fit_crop_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int =
     return _nan_median_or_one(np.array(rows))
 
 
-def _nan_median_or_one(rows: NDArray[np.float64]) -> tuple[float, ...]:
+def median_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int = WIDTH_PROFILE_BINS) -> NDArray[np.float64]:
+    """The median of object scans' :func:`width_profile`, bin by bin, over the scans that fill the bin.
+
+    Parameters
+    ----------
+    clouds : sequence of (N_i, 3) float
+        Object scans; sensor at the origin, z up, metres.
+    n_bins : int
+        Bins, >= 2.
+
+    Returns
+    -------
+    (n_bins,) float64
+        NaN in a bin that no scan fills (and everywhere for no scans).
+
+    Raises
+    ------
+    InvalidInputError
+        A scan that is not finite (N, 3), or ``n_bins`` < 2.
+    """
+    if int(n_bins) < 2:
+        raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
+    rows = [_width_profile(_checked_scan(i, c), int(n_bins)) for i, c in enumerate(clouds)]
+    return _nan_median(np.array(rows).reshape(len(rows), int(n_bins)))
+
+
+def _nan_median(rows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per column of ``rows (K, B)``, the median of its finite values; NaN where it has none."""
     filled = np.isfinite(rows).any(axis=0)
-    median = np.full(rows.shape[1], 1.0)
+    median = np.full(rows.shape[1], np.nan)
     median[filled] = np.nanmedian(rows[:, filled], axis=0)
-    return tuple(float(v) for v in median)
+    return median
+
+
+def _nan_median_or_one(rows: NDArray[np.float64]) -> tuple[float, ...]:
+    """:func:`_nan_median` with 1.0 (no warp) where a column has no finite value."""
+    return tuple(float(v) if math.isfinite(v) else 1.0 for v in _nan_median(rows))
 
 
 def _check_height(sensor_height_m) -> float:
