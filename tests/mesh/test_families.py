@@ -259,6 +259,31 @@ def test_a_pedestrians_feet_stand_a_step_width_apart_closer_than_the_hips(seed: 
         assert np.ptp(bottom[:, 1]) <= 2 * 0.030 * p["height_m"] * p["build"] + 0.5 * abs(hips - p["step_width_m"]) + 1e-9
 
 
+@FEW
+@given(seed=SEEDS)
+def test_a_pedestrians_upper_body_wears_its_clothing_and_its_head_its_hair(seed: int) -> None:
+    """Across the body (y) the upper arms span Winter's shoulder breadth 0.259 H x build plus the clothing
+    on both sides of each arm; the torso is as deep as drawn plus the clothing on front and back; the
+    head is as broad and as long as its ellipsoid plus the hair on each side; the legs are bare."""
+    from zbuf_occlude.mesh.families.pedestrian import PROPORTIONS, RADII, RANGES
+
+    _, pieces, p, _ = drawn("pedestrian", seed)
+    h, b, cloth, hair = p["height_m"], p["build"], p["clothing_m"], p["hair_m"]
+    assert RANGES["clothing_m"][0] <= cloth <= RANGES["clothing_m"][1] and RANGES["hair_m"][0] <= hair <= RANGES["hair_m"][1]
+    upper_arms = np.vstack([used(m) for m in pieces["arm"][0::2]])  # each arm's first segment, swinging in x-z
+    assert np.ptp(upper_arms[:, 1]) == pytest.approx(PROPORTIONS["shoulder_breadth"] * h * b + 4 * cloth, rel=0.01)
+    for arm in pieces["arm"][0::2]:
+        assert np.ptp(used(arm)[:, 1]) == pytest.approx(2 * (RADII["upper_arm"] * h * b + cloth), rel=0.02)
+    torso = used(pieces["torso"][0])
+    assert np.ptp(torso[:, 0]) == pytest.approx(p["depth_ratio"] * h * b + 2 * cloth, rel=0.02)
+    head = used(pieces["head"][0])
+    assert np.ptp(head[:, 0]) == pytest.approx(2 * (0.056 * h + hair), rel=0.02)
+    assert np.ptp(head[:, 1]) == pytest.approx(2 * (0.044 * h + hair), rel=0.02)
+    thigh = used(pieces["leg"][0])
+    hips = 2 * 0.055 * h * b
+    assert np.ptp(thigh[:, 1]) <= 2 * RADII["thigh"] * h * b + 0.5 * abs(hips - p["step_width_m"]) + 1e-9
+
+
 def test_pedestrians_stand_and_walk_and_carry_in_their_shares() -> None:
     drawn_ = [FAMILIES["pedestrian"].parts(family_rng("pedestrian", 0, k))[1] for k in range(400)]
     standing = np.mean([p["stride_deg"] < 3 for p in drawn_])
