@@ -390,6 +390,7 @@ MAX_ZBUFFER_OFF_LAW = 10
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(el=st.floats(-89.0, 89.0), az=st.floats(0.0, 360.0))
 @example(el=84.89453125, az=209.1879417510707)  # grazing faces (see `grazing`)
+@example(el=0.0, az=306.21875)  # the largest share of the points on front faces (see the area's bound)
 def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
     # A point of a closed convex polyhedron is visible iff its face looks at the camera.
     camera = zo.camera_on_sphere(el, az, 4.0, resolution=256)
@@ -408,9 +409,10 @@ def test_a_closed_convex_mesh_shows_its_front_faces(el, az):
             cameras=CameraSphere(resolution=256), method=method,
         )  # fmt: skip
         assert np.count_nonzero(visible[decided] != front[decided]) <= allowed, method
-        # about half the area: a sphere of radius 0.5 seen from 4 shows (1 - 0.5/4)/2 = 0.4375
-        # (the inscribed icosphere: 0.438-0.444 measured)
-        assert abs(visible.mean() - 0.4375) < 0.01, method
+        # about half the area: a sphere of radius 0.5 seen from 4 shows (1 - 0.5/4)/2 = 0.4375; the
+        # inscribed icosphere's front faces hold 0.428-0.448 of these 20,000 points over 3,000 random
+        # views (its facets and the sampling; el=0, az=306.21875 gives 0.44785)
+        assert abs(visible.mean() - 0.4375) < 0.015, method
         for cloud in clouds:
             idx = _dense_indices(_SPHERE_DENSE, cloud)
             assert visible[idx].all()
