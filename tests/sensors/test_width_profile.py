@@ -13,7 +13,15 @@ from hypothesis import strategies as st
 from zbuf_occlude.errors import InvalidInputError
 from zbuf_occlude.sensors.crops import object_crop
 from zbuf_occlude.sensors.placement import CropDistributions, draw_placement
-from zbuf_occlude.sensors.fit import crop_placement_json, fit_crop_width_profile, fit_width_profile, median_width_profile, width_profile
+from zbuf_occlude.sensors.fit import (
+    across_sight_width,
+    crop_placement_json,
+    fit_crop_width_profile,
+    fit_width_profile,
+    median_width_profile,
+    sight_coordinates,
+    width_profile,
+)
 from zbuf_occlude.sensors.kinds import with_beam
 from zbuf_occlude.sensors.patterns.spinning import lidar_preset
 from zbuf_occlude.sensors.scene.object_shapes import FACE_ROWS, width_profile_factors
@@ -93,6 +101,25 @@ def test_median_width_profile_is_the_median_per_bin_and_nan_where_no_scan_fills_
     assert median_width_profile([], n_bins=3).shape == (3,) and np.isnan(median_width_profile([], n_bins=3)).all()
     with pytest.raises(InvalidInputError, match="n_bins"):
         median_width_profile(clouds, n_bins=1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(turn_deg=st.floats(-180.0, 180.0), lift=st.floats(-3.0, 3.0))
+def test_sight_coordinates_turn_with_the_scan_and_measure_what_the_width_measures(turn_deg: float, lift: float) -> None:
+    """A scan straight ahead (+x): along is x and across is y; turned about the sensor's vertical axis or raised,
+    its coordinates stay; the extent across per band is what :func:`across_sight_width` takes the median of."""
+    scan = _stack([0.3, 0.5, 0.5, 0.4])
+    np.testing.assert_allclose(sight_coordinates(scan), scan[:, :2], atol=1e-12)
+    a = np.radians(turn_deg)
+    turned = scan @ np.array([[np.cos(a), np.sin(a), 0.0], [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) + [0.0, 0.0, lift]
+    np.testing.assert_allclose(sight_coordinates(turned), scan[:, :2], atol=1e-9)
+    across, z = sight_coordinates(turned)[:, 1], turned[:, 2]
+    bands = np.floor((z - z.min()) / 0.1).astype(int)
+    widths = [np.ptp(across[bands == b]) for b in np.unique(bands) if (bands == b).sum() >= 2]
+    assert across_sight_width(turned, band_m=0.1) == pytest.approx(np.median(widths))
+    assert sight_coordinates(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]])) == pytest.approx(np.zeros((2, 2)))  # straight above
+    with pytest.raises(InvalidInputError):
+        sight_coordinates(np.array([[np.nan, 0.0, 0.0]]))
 
 
 @settings(max_examples=40, deadline=None)

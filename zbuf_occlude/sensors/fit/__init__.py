@@ -88,6 +88,7 @@ from zbuf_occlude.sensors.fit.scans import (
     fit_crop_widths,
     fit_sensor_height,
     median_width_profile,
+    sight_coordinates,
     width_profile,
 )
 from zbuf_occlude.sensors.fit.shapes import (
@@ -103,7 +104,7 @@ __all__ = [
     "across_sight_width", "BOOTSTRAP", "crop_placement_json", "DISTANCE_QUANTILES", "Estimate", "fit_crop_bottoms",
     "fit_crop_distances", "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_lidar", "fit_object_shape",
     "fit_sensor_height", "fit_visible_across_sight", "fit_width_profile", "fit_width_scale", "LidarFit", "median_width_profile",
-    "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M",
+    "MAX_DROPOUT_GAP", "MIN_PLACEMENT_SCANS", "MIN_RETURNS", "PLANE_NEIGHBOURS", "SENSOR_HEIGHT_QUANTILE", "sight_coordinates", "WIDTH_BAND_M",
     "width_profile", "WIDTH_PROFILE_BINS", "WIDTH_SAMPLES", "return_statistics", "ReturnStatistics", "VEGETATION_CLASSES",
     "divergence_curve", "divergence_from_shares", "fit_divergence", "fit_return_model", "merge_scans", "ReturnModelFit",
     "dropout_by_surface", "fit_foliage_dropout", "is_crown_class",

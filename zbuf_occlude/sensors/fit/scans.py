@@ -26,7 +26,8 @@ from zbuf_occlude.sensors.fit.lidar import _checked_scan
 __all__ = [
     "across_sight_width", "crop_placement_json", "DISTANCE_QUANTILES", "fit_crop_bottoms", "fit_crop_distances",
     "fit_crop_heights", "fit_crop_width_profile", "fit_crop_widths", "fit_sensor_height", "median_width_profile",
-    "MIN_PLACEMENT_SCANS", "SENSOR_HEIGHT_QUANTILE", "WIDTH_BAND_M", "width_profile", "WIDTH_PROFILE_BINS",
+    "MIN_PLACEMENT_SCANS", "SENSOR_HEIGHT_QUANTILE", "sight_coordinates", "WIDTH_BAND_M", "width_profile",
+    "WIDTH_PROFILE_BINS",
 ]  # fmt: skip
 #: Non-empty scans a class needs for its crops' distances and heights (:func:`crop_placement_json`).
 MIN_PLACEMENT_SCANS = 3
@@ -227,12 +228,46 @@ def _extent_per_group(values: NDArray[np.float64], groups: NDArray[np.int64]):
     return sorted_groups[starts], extent, np.diff(np.r_[starts, len(values)])
 
 
-def _across_sight(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(N,)`` each return's coordinate along the horizontal direction perpendicular to the line
-    of sight from the sensor (the origin) to the scan's centroid; along x for a centroid straight above."""
-    sight = p[:, :2].mean(axis=0)
+def sight_coordinates(points: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Each return's horizontal coordinates along and across the line of sight, metres.
+
+    The line of sight runs from the sensor (the origin) to the scan's centroid, in the ground plane;
+    across is perpendicular to it, 90 degrees counter-clockwise seen from above (the direction
+    :func:`across_sight_width` and :func:`width_profile` measure in).  For a centroid straight above the
+    sensor, across is x and along is −y.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        One object scan; sensor at the origin, z up, metres.
+
+    Returns
+    -------
+    (N, 2) float64
+        Along, then across the line of sight.
+
+    Raises
+    ------
+    InvalidInputError
+        ``points`` not a finite (N, 3) array.
+    """
+    p = _checked_scan(0, points)
+    sight = _sight_unit(p)
+    return np.column_stack([p[:, :2] @ sight, _across_sight(p, sight)])
+
+
+def _sight_unit(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The unit horizontal direction from the sensor (the origin) to the scan's centroid; −y for a centroid straight above."""
+    sight = p[:, :2].mean(axis=0) if len(p) else np.zeros(2)
     norm = float(np.hypot(*sight))
-    return p[:, :2] @ (np.array([-sight[1], sight[0]]) / norm if norm > 0 else np.array([1.0, 0.0]))
+    return sight / norm if norm > 0 else np.array([0.0, -1.0])
+
+
+def _across_sight(p: NDArray[np.float64], sight: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """``(N,)`` each return's coordinate along the horizontal direction perpendicular to the line
+    of sight ``sight`` (:func:`_sight_unit` by default); along x for a centroid straight above."""
+    sight = _sight_unit(p) if sight is None else sight
+    return p[:, :2] @ np.array([-sight[1], sight[0]])
 
 
 def fit_crop_widths(clouds: Sequence[NDArray[np.floating]]) -> tuple[float, float]:
@@ -328,11 +363,7 @@ def fit_crop_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int =
     InvalidInputError
         Fewer than 3 scans that show a width, a scan that is not finite (N, 3), or ``n_bins`` < 2.
     """
-    if int(n_bins) < 2:
-        raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
-    rows = [
-        row for i, c in enumerate(clouds) if len(p := _checked_scan(i, c)) and np.any(np.isfinite(row := _width_profile(p, int(n_bins))))
-    ]
+    rows = [row for row in _profile_rows(clouds, n_bins) if np.isfinite(row).any()]
     if len(rows) < MIN_PLACEMENT_SCANS:
         raise InvalidInputError(f"fit_crop_width_profile needs at least {MIN_PLACEMENT_SCANS} scans that show a width, got {len(rows)}")
     return _nan_median_or_one(np.array(rows))
@@ -358,10 +389,15 @@ def median_width_profile(clouds: Sequence[NDArray[np.floating]], n_bins: int = W
     InvalidInputError
         A scan that is not finite (N, 3), or ``n_bins`` < 2.
     """
+    rows = _profile_rows(clouds, n_bins)
+    return _nan_median(np.array(rows).reshape(len(rows), int(n_bins)))
+
+
+def _profile_rows(clouds: Sequence[NDArray[np.floating]], n_bins) -> list[NDArray[np.float64]]:
+    """:func:`width_profile` of each scan (checked; all NaN for one that shows no width), ``n_bins`` checked first."""
     if int(n_bins) < 2:
         raise InvalidInputError(f"n_bins must be >= 2, got {n_bins!r}")
-    rows = [_width_profile(_checked_scan(i, c), int(n_bins)) for i, c in enumerate(clouds)]
-    return _nan_median(np.array(rows).reshape(len(rows), int(n_bins)))
+    return [_width_profile(_checked_scan(i, c), int(n_bins)) for i, c in enumerate(clouds)]
 
 
 def _nan_median(rows: NDArray[np.float64]) -> NDArray[np.float64]:
