@@ -9,8 +9,8 @@ camera)``, preparation included), the preparation alone (``zo.point_surfels(poin
 neighbour search and the normals), one view of a prepared cloud (``surfels.visible(camera)``),
 and Open3D's ``hidden_point_removal`` (Katz et al. 2007) at radius factor 100 (Open3D's
 example, the ``open3d-hpr`` method's default) when ``import open3d`` works.  Reported per N: the
-median wall ms over the poses and the ratios.  ``--gpu`` adds the GPU backend's view (OpenGL
-point sprites; on Mesa llvmpipe the "GPU" is the CPU too) and the share of point-views whose
+median wall ms over the poses and the ratios.  ``--gpu`` adds the GPU backend's view (an OpenGL
+compute shader; on Mesa llvmpipe the "GPU" is the CPU too) and the share of point-views whose
 masks agree with the CPU's.
 
 The load average and numba's thread count are printed: the numbers are indicative on a shared
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=int, nargs="+", default=[2048, 10_000, 100_000])
     parser.add_argument("--poses", default="fibonacci:16", help="a zo.view_schedule spec (default fibonacci:16)")
     parser.add_argument("--no-hpr", action="store_true", help="skip Open3D's hidden point removal")
-    parser.add_argument("--gpu", action="store_true", help="also the GPU backend (OpenGL point sprites) and its agreement")
+    parser.add_argument("--gpu", action="store_true", help="also the GPU backend (an OpenGL compute shader) and its agreement")
     args = parser.parse_args(argv)
     try:
         import open3d  # noqa: F401
@@ -122,11 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"mesh {args.mesh.name}, {len(cameras)} poses ({args.poses}), no normals (estimated)")
     if args.gpu:
         from zbuf_occlude.render.context import context_info
-        from zbuf_occlude.render.point_sprites import shared_point_sprites
 
         info = context_info()
-        print(f"OpenGL: {info['renderer']} ({info['backend']}, {info['version']}); "
-              f"largest point size {shared_point_sprites().max_point_size:g} px")  # fmt: skip
+        print(f"OpenGL: {info['renderer']} ({info['backend']}, {info['version']})")
     print(
         f"CPU cores: {len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}; "
         f"numba threads: {numba.get_num_threads()}; load average (1, 5, 15 min) before: {load_average()}"

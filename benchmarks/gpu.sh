@@ -14,8 +14,9 @@
 #      (the meshes of ../shared/data/modelnet_subset, else the shipped data/samples, repeated
 #      as distinct objects), one worker per CPU, dense and compact storage -- benchmarks/bench_farm.py;
 #   4. occlusion on the fly: DataLoader samples/s beside a stored data set -- benchmarks/bench_on_the_fly.py;
-#   5. point-splat visibility: the GPU rasteriser's masks and buffers against the CPU's on the shipped
-#      meshes, 2,048 and 10,000 points, 16 poses -- benchmarks/agreement_point_sprites.py;
+#   5. point-splat visibility: the GPU z-buffer's masks and buffers against the CPU's on the shipped
+#      meshes, 2,048 and 10,000 points, 16 poses -- benchmarks/agreement_point_splats.py; and a GPU
+#      view part by part beside the CPU's whole view, up to 100,000 points -- benchmarks/profile_point_splats.py;
 # and writes OUT/gpu.md: a Markdown report naming the device (OpenGL renderer string,
 # nvidia-smi's GPU name and driver), with the tables.  --smoke: tiny sizes, any renderer
 # (the CPU half runs in CI: tests/test_benchmarks.py).  --force: measure even when the load
@@ -70,11 +71,11 @@ meshes="$root/../shared/data/modelnet_subset"
 if [ "$smoke" = 1 ]; then
     points="2000" poses="fibonacci:3" farm=(--objects 2 --views fibonacci:2 --samples-per-view 2 --points 256 --dense-points 4096 --workers 1 --storage dense)
     peers=(--smoke) on_the_fly=(--views 2 --points 256 --dense 2048 --batch 4 --width 0.125 --repeats 1)
-    splat_agreement=(--points 256 --poses fibonacci:2 --meshes 2)
+    splat_agreement=(--points 256 --poses fibonacci:2 --meshes 2) splat_profile=(--points 256 --poses fibonacci:2 --meshes 1)
 else
     workers="$(nproc)"
     points="100000,1000000,10000000" poses="fibonacci:15" farm=(--objects 200 --views paper100 --samples-per-view 10 --workers "$workers" --storage dense,compact)
-    splat_agreement=(--points 2048,10000 --poses fibonacci:16)
+    splat_agreement=(--points 2048,10000 --poses fibonacci:16) splat_profile=(--points 2048,10000,100000 --poses fibonacci:16)
     peers=() on_the_fly=(--views 16 --workers "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --threads "$(( workers / 2 > 1 ? workers / 2 : 1 ))" --width 0.25 --repeats 2)
 fi
 [ -z "$points_arg" ] || points="$points_arg"
@@ -89,7 +90,8 @@ print(f'kept session: {choose_method()} (s per view: {calibrate()}); one-shot ca
 ZBUF_OCCLUDE_AUTO=calibrate "$py" "$root/benchmarks/bench_visibility_peers.py" "${peers[@]}" "${force[@]}" --gpu-methods \
     --points "$points" --poses "$poses" > "$out/visibility.md"
 "$py" "$root/benchmarks/profile_gpu_exact.py" --points "$points" --poses "$poses" > "$out/profile.md"
-"$py" "$root/benchmarks/agreement_point_sprites.py" "${splat_agreement[@]}" > "$out/point_splat_agreement.md"
+"$py" "$root/benchmarks/agreement_point_splats.py" "${splat_agreement[@]}" > "$out/point_splat_agreement.md"
+"$py" "$root/benchmarks/profile_point_splats.py" "${splat_profile[@]}" > "$out/point_splat_profile.md"
 if [ "$farm_run" = 1 ]; then
     "$py" "$root/benchmarks/bench_farm.py" --root "$meshes" "${farm[@]}" --markdown > "$out/farm.md"
     "$py" "$root/benchmarks/bench_on_the_fly.py" "${on_the_fly[@]}" > "$out/on_the_fly.md"
@@ -125,5 +127,7 @@ fi
     echo "## Point-splat visibility: GPU against CPU"
     echo
     sed 's/^# /- /' "$out/point_splat_agreement.md"
+    echo
+    sed 's/^# /- /; s/^## /### /' "$out/point_splat_profile.md"
 } > "$out/gpu.md"
 echo "gpu.sh: wrote $out/gpu.md" >&2

@@ -42,6 +42,7 @@ def test_gpu_benchmark_smoke_writes_its_report(tmp_path):
     assert "Load average (1, 5, 15 min) after" in report
     assert "## zbuffer-exact, stage by stage" in report and "| bin count ms |" in report
     assert "## Occlusion on the fly" in report and "| on-the-fly |" in report
+    assert "## Point-splat visibility: GPU against CPU" in report and "### A GPU view's parts" in report
 
 
 @pytest.mark.slow

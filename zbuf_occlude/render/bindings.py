@@ -19,7 +19,7 @@ __all__ = [
     "EXACT_PARAMS", "EXACT_PLANES", "EXACT_POINTS", "EXACT_POINTS64", "EXACT_POINT_FACES",
     "EXACT_POINT_INDEX", "EXACT_TILE_COUNT", "EXACT_TILE_FACES", "EXACT_TILE_START", "EXACT_TRIANGLES",
     "GROUP_SIZE", "PROBE_PAIRS", "PROBE_PAIR_FACES", "PROBE_PLANES", "PROBE_RESULT", "SCAN_HITS", "SCAN_RAYS",
-    "SCAN_TRIANGLES", "SHADER_DEFINES", "SPLAT_KEY_HIGH", "SPLAT_KEY_LOW", "SPLAT_SURFELS", "SPLAT_WINNER", "VISIBILITY_BITS", "VISIBILITY_POINTS", "VISIBILITY_POINT_FACES",
+    "SCAN_TRIANGLES", "SHADER_DEFINES", "SPLAT_DEPTH", "SPLAT_KEY_HIGH", "SPLAT_KEY_LOW", "SPLAT_SURFELS", "SPLAT_WINNER", "VISIBILITY_BITS", "VISIBILITY_POINTS", "VISIBILITY_POINT_FACES",
     "VISIBILITY_TRIANGLES",
 ]  # fmt: skip
 
@@ -90,15 +90,17 @@ PROBE_PAIR_FACES = 2
 #: Written: int per pair, MISS, HIT or TIE.
 PROBE_RESULT = 3
 
-# point_splat.frag (point-splat's GPU rasteriser, zbuf_occlude.render.point_sprites)
+# point_splat.comp (point-splat's GPU z-buffer, zbuf_occlude.render.surfel_zbuffer)
 #: Read: float64 per surfel, 7 each (centre, normal, radius).
 SPLAT_SURFELS = 0
-#: Image unit, r32ui: the high word of the least depth's bits at each pixel.
-SPLAT_KEY_HIGH = 0
-#: Image unit, r32ui: the low word of the least depth's bits among those with that high word.
-SPLAT_KEY_LOW = 1
-#: Image unit, r32ui: the least surfel id among those with that depth.
-SPLAT_WINNER = 2
+#: uint per pixel of the band: the high word of the least depth's bits.
+SPLAT_KEY_HIGH = 1
+#: uint per pixel: the low word of the least depth's bits among those with that high word.
+SPLAT_KEY_LOW = 2
+#: uint per pixel: the least surfel id among those with that depth.
+SPLAT_WINNER = 3
+#: Written by the resolve pass: float64 per pixel (as two uint words), the winner's depth, +inf where none.
+SPLAT_DEPTH = 4
 
 #: ``(name, value)`` of every constant above, as :func:`~zbuf_occlude.render.shaders.load_shader`
 #: defines them in each shader.

@@ -1,4 +1,4 @@
-"""The GPU surfel z-buffer (zbuf_occlude.render.point_sprites) against the numba kernel it mirrors,
+"""The GPU surfel z-buffer (zbuf_occlude.render.surfel_zbuffer) against the numba kernel it mirrors,
 and the ``backend`` switch of point-only visibility.
 
 The GPU computes with the kernel's float64 operations and breaks ties as it does (the least
@@ -8,20 +8,21 @@ These run on Mesa llvmpipe headless, as the other GL tests, and never skip.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
-from zbuf_occlude.render import point_sprites
-from zbuf_occlude.render.point_sprites import PointSpriteRenderer, shared_point_sprites
+from zbuf_occlude.render import surfel_zbuffer
+from zbuf_occlude.render.surfel_zbuffer import SLICES, SurfelZBuffer, shared_surfel_zbuffer, tiles
 from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
 from zbuf_occlude.visibility.splat_image import splat_image
 
-#: Every surfel a sprite (the GL's own limit), every surfel a quad, or 32-pixel tiles.
-PASSES = {"sprites": {}, "quads": {"max_point_size": 1.0}, "tiles": {"max_tile": 32}}
+#: The image in one tile (the GL's own limit), in bands of whole rows (up to 4,096 pixels a tile),
+#: or each row in parts (up to 128 pixels a tile).
+PASSES = {"one tile": {}, "bands": {"max_tile_bytes": 8 * 4096}, "row parts": {"max_tile_bytes": 8 * 128}}
 
 
 def _view(mesh_path, n, pose, normals=False):
@@ -57,10 +58,10 @@ def _random_surfels(n=800, seed=0):
 def test_buffers_match_the_cpu_kernel_on_random_disks(setting):
     cam, normal, radius = _random_surfels()
     image = (0.004, -0.6, -0.45, 300, 225)
-    with PointSpriteRenderer() as renderer:
+    with SurfelZBuffer() as zbuffer:
         for name, value in PASSES[setting].items():
-            setattr(renderer, name, value)
-        gpu = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
+            setattr(zbuffer, name, value)
+        gpu = zbuffer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
     assert _assert_buffers_equal(cam, normal, radius, image, gpu) > 0.5 * 300 * 225
 
 
@@ -69,97 +70,78 @@ def test_buffers_match_the_cpu_kernel_on_a_sampled_mesh(sample_mesh_files, setti
     """Neighbours on one flat sheet tie at many pixels (a tenth of them here, decided by
     float64 rounding): the GPU's rounding and its tie rule are the kernel's."""
     chair = next(p for p in sample_mesh_files if "chair" in p.name)
-    with PointSpriteRenderer() as renderer:
+    with SurfelZBuffer() as zbuffer:
         for name, value in PASSES[setting].items():
-            setattr(renderer, name, value)
+            setattr(zbuffer, name, value)
         for pose in ((30.0, 45.0), (-20.0, 200.0)):
             cam, normal, radius, image = _view(chair, 2048, pose)
-            gpu = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
+            gpu = zbuffer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
             assert _assert_buffers_equal(cam, normal, radius, image, gpu) > 1000
 
 
-#: The strip the quad test draws into: the pixels of it the near disk covers beyond the GL's largest
-#: point size, the pixels to its right where the small surfels show, and its height.  A strip, not
-#: a square: a box's longer side decides the route, and an image as wide and as tall as the largest
-#: point size (8192² on some GLs) would cost gigabytes for nothing.
-_BEYOND_PX, _GAP_PX, _STRIP_PX = 16, 16, 16
-#: The widest strip drawn (16 rows of it take 200 MB on the CPU and the GPU): a GL whose largest point
-#: size is near this cannot show a surfel larger than it in an image a test can afford.
-_MAX_STRIP_WIDTH_PX = 1 << 20
+@pytest.mark.parametrize("setting", PASSES)
+def test_a_surfel_wider_than_the_image_fills_what_the_kernel_fills(setting):
+    """A disk just in front of the camera covers a 2,000 × 40 strip: its box spans every column and
+    row, each of its invocations tests 40 / SLICES rows, and in tiles it is tested in each; three
+    small disks behind it stay hidden where it covers them and show where it does not."""
+    pix = 1.0 / 1000
+    image = (pix, -0.75, -20 * pix, 2000, 40)
 
+    def at(column: float, row: float, z: float) -> list[float]:  # a point at z seen at pixel (column, row)
+        return [z * (image[1] + column * pix), z * (image[2] + row * pix), z]
 
-def test_a_surfel_beyond_the_largest_point_size_is_drawn_as_a_quad(monkeypatch):
-    """On any GL, whatever its limits: the strip is sized from the GL's own largest point size (and
-    drawn in tiles where it is wider than the GL's images), so that a disk covering its width has a
-    box wider than any sprite; small disks beside it stay sprites, and the buffers are the kernel's."""
-    split, routes = point_sprites._Boxes.split, []
-    monkeypatch.setattr(point_sprites._Boxes, "split", lambda box, *args: routes.append(split(box, *args)) or routes[-1])
-    with PointSpriteRenderer() as renderer:
-        cover = math.ceil(renderer.max_point_size) + _BEYOND_PX
-        width = cover + _GAP_PX
-        if width > _MAX_STRIP_WIDTH_PX:
-            pytest.skip(f"the GL's largest point size is {renderer.max_point_size:g} pixels: no affordable image is wider")
-        # disk 0 faces the camera 0.1 mm beyond its own radius: it spans x/z in ±0.990099, and the
-        # strip ends cover pixels right of its left edge, which lies far left of the strip
-        near_edge = 0.01 / 0.0101
-        pix = 1.0 / cover
-        image = (pix, near_edge - cover * pix, -0.5 * _STRIP_PX * pix, width, _STRIP_PX)
-
-        def at(column: float, row: float, z: float) -> list[float]:  # a point at z seen at pixel (column, row)
-            return [z * (image[1] + column * pix), z * (image[2] + row * pix), z]
-
-        # disk 1 centred 2 px right of the strip, reaching 5 px into it; 2 and 3 small, in the gap, behind disk 0's plane
-        cam = np.array([[0.0, 0.0, 0.0101], at(width + 2, 8, 1.5), at(cover + 5, 5, 2.0), at(cover + 11, 10, 2.0)])
-        normal = np.tile([0.0, 0.0, 1.0], (4, 1))
-        radius = np.array([0.01, 7 * pix * 1.5, 2.5 * pix * 2.0, 2.5 * pix * 2.0])
-        depth, ids = renderer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
-        small_are_sprites = renderer.max_point_size >= max(_GAP_PX, _STRIP_PX) + 2  # every small box fits the gap
-    assert len(routes) == math.ceil(width / renderer.max_tile)  # one split a tile
-    for sprites, quads in routes:
-        assert 0 in quads and 0 not in sprites, routes
-    sprites_seen = set().union(*(set(sprites.tolist()) for sprites, _ in routes))
-    assert sprites_seen == ({1, 2, 3} if small_are_sprites else set()), (routes, renderer.max_point_size)
+    # disk 0 faces the camera 0.1 mm beyond its own radius: it spans x/z in ±0.990099, the strip's
+    # left three quarters and more; disks 1-3 lie behind its plane, 1 under it, 2 and 3 right of it
+    cam = np.array([[0.0, 0.0, 0.0101], at(500, 20, 1.5), at(1900, 5, 2.0), at(1950, 30, 2.0)])
+    normal = np.tile([0.0, 0.0, 1.0], (4, 1))
+    radius = np.array([0.01, 7 * pix * 1.5, 2.5 * pix * 2.0, 2.5 * pix * 2.0])
+    with SurfelZBuffer() as zbuffer:
+        for name, value in PASSES[setting].items():
+            setattr(zbuffer, name, value)
+        depth, ids = zbuffer.splat(cam, normal, radius, *image, edge_on_cos=EDGE_ON_COS)
     depth_cpu, ids_cpu = splat_surfels(cam, normal, radius, *image)
     assert np.array_equal(ids, ids_cpu) and np.array_equal(depth, depth_cpu)
-    assert (ids == 0).sum() >= (cover - 1) * _STRIP_PX and {1, 2, 3} <= set(np.unique(ids).tolist())  # the near disk; the rest in the gap
+    assert (ids == 0).sum() >= 1700 * 40 > 8 * SLICES and set(np.unique(ids).tolist()) == {-1, 0, 2, 3}
 
 
-def test_the_quad_test_sizes_its_strip_from_the_gl_it_runs_on(monkeypatch):
-    """The same test under other GLs' limits, by the renderer's queried values: a largest point size
-    of 2047 (NVIDIA), 8192, and one equal to the largest image (16384 with the image at 16384 is
-    drawn in two tiles; here scaled down, 64 with 64-pixel tiles, to keep the strip small)."""
-    init = PointSpriteRenderer.__init__
-    for max_point_size, max_tile in ((2047.0, None), (8192.0, None), (64.0, 64)):
-
-        def limited(self, *args, _size=max_point_size, _tile=max_tile, **kwargs):
-            init(self, *args, **kwargs)
-            self.max_point_size = _size
-            self.max_tile = _tile or self.max_tile
-
-        with monkeypatch.context() as patched:
-            patched.setattr(PointSpriteRenderer, "__init__", limited)
-            test_a_surfel_beyond_the_largest_point_size_is_drawn_as_a_quad(patched)
+@settings(deadline=None)
+@given(width=st.integers(1, 80), height=st.integers(1, 80), max_pixels=st.integers(1, 2000))
+def test_tiles_cover_the_image_once_within_the_limit(width, height, max_pixels):
+    """Every pixel in exactly one tile, no tile over ``max_pixels``, and whole rows whenever a row fits."""
+    covered = np.zeros((height, width), dtype=int)
+    for i0, j0, w, h in tiles(width, height, max_pixels):
+        assert w * h <= max_pixels and w >= 1 and h >= 1
+        assert w == width or (h == 1 and width > max_pixels)
+        covered[j0 : j0 + h, i0 : i0 + w] += 1
+    assert (covered == 1).all()
 
 
 def test_nothing_drawable_gives_empty_buffers():
     cam = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 0.005]])  # behind the camera; its sphere crosses z = 0
     normal = np.tile([0.0, 0.0, 1.0], (2, 1))
     radius = np.array([0.1, 0.01])
-    depth, ids = shared_point_sprites().splat(cam, normal, radius, 0.01, -1.0, -1.0, 20, 10, edge_on_cos=EDGE_ON_COS)
+    depth, ids = shared_surfel_zbuffer().splat(cam, normal, radius, 0.01, -1.0, -1.0, 20, 10, edge_on_cos=EDGE_ON_COS)
     assert depth.shape == (10, 20) and np.isinf(depth).all() and (ids == -1).all()
 
 
+@pytest.mark.parametrize("n, width, height", [(0, 20, 10), (1, 0, 10), (1, 20, 0)])
+def test_no_surfels_or_no_pixels_give_empty_buffers(n, width, height):
+    cam, normal, radius = np.tile([0.0, 0.0, 2.0], (n, 1)), np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, 0.1)
+    depth, ids = shared_surfel_zbuffer().splat(cam, normal, radius, 0.01, -0.1, -0.1, width, height, edge_on_cos=EDGE_ON_COS)
+    assert depth.shape == ids.shape == (height, width) and np.isinf(depth).all() and (ids == -1).all()
+
+
 def test_release_frees_every_gl_object():
-    renderer = PointSpriteRenderer()
+    zbuffer = SurfelZBuffer()
     cam, normal, radius = np.array([[0.0, 0.0, 2.0]]), np.array([[0.0, 0.0, 1.0]]), np.array([0.1])
-    renderer.splat(cam, normal, radius, 0.01, -0.1, -0.1, 20, 20, edge_on_cos=EDGE_ON_COS)
-    target = renderer._target
-    objects = [*renderer._programs.values(), target.draw, target.read, *target.images]
-    renderer.release()
-    renderer.release()  # twice is fine
+    zbuffer.splat(cam, normal, radius, 0.01, -0.1, -0.1, 20, 20, edge_on_cos=EDGE_ON_COS)
+    objects = [zbuffer._shader, zbuffer._resolve, *zbuffer._buffers.values()]
+    assert len(objects) == 2 + 7  # the surfels, a blank, three keys, the depth, the staging buffer
+    zbuffer.release()
+    zbuffer.release()  # twice is fine
     assert all(type(obj.mglo).__name__ == "InvalidObject" for obj in objects)
     with pytest.raises(RuntimeError, match="released"):
-        renderer.splat(cam, normal, radius, 0.01, -0.1, -0.1, 20, 20, edge_on_cos=EDGE_ON_COS)
+        zbuffer.splat(cam, normal, radius, 0.01, -0.1, -0.1, 20, 20, edge_on_cos=EDGE_ON_COS)
 
 
 @pytest.mark.parametrize("normals", [False, True], ids=["estimated", "given"])
@@ -194,8 +176,8 @@ def test_the_gpu_backend_without_opengl_is_backend_unavailable(monkeypatch):
     def no_gl():
         raise BackendUnavailable("no headless OpenGL 4.3 context could be created (test)")
 
-    monkeypatch.setattr(point_sprites, "shared_context", no_gl)
-    monkeypatch.setattr(point_sprites, "_shared", {})
+    monkeypatch.setattr(surfel_zbuffer, "shared_context", no_gl)
+    monkeypatch.setattr(surfel_zbuffer, "_shared", {})
     surfels = zo.point_surfels(np.random.default_rng(0).normal(size=(50, 3)))
     with pytest.raises(BackendUnavailable, match="OpenGL"):
         surfels.visible(zo.camera_on_sphere(0.0, 0.0), backend="gpu")

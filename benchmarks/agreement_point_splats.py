@@ -1,4 +1,4 @@
-"""Point-only visibility: how often the GPU rasteriser (OpenGL, ``backend="gpu"``) gives the same
+"""Point-only visibility: how often the GPU z-buffer (an OpenGL compute shader, ``backend="gpu"``) gives the same
 mask and the same buffers as the CPU one (numba, ``backend="cpu"``) (prints a Markdown table; not
 a test).
 
@@ -13,8 +13,8 @@ two interleaved, their order alternating pose by pose: indicative on a shared ma
 
 Usage::
 
-    .venv/bin/python benchmarks/agreement_point_sprites.py                   # 2,048 and 10,000 points, 16 poses
-    .venv/bin/python benchmarks/agreement_point_sprites.py --points 256 --poses fibonacci:2 --meshes 1
+    .venv/bin/python benchmarks/agreement_point_splats.py                   # 2,048 and 10,000 points, 16 poses
+    .venv/bin/python benchmarks/agreement_point_splats.py --points 256 --poses fibonacci:2 --meshes 1
 """
 
 from __future__ import annotations
@@ -50,10 +50,10 @@ def buffers_of(surfels, camera, splat):
 
 
 def agreement(meshes: list[Path], n: int, cameras: list[zo.Camera], normals: bool) -> dict[str, float]:
-    from zbuf_occlude.render.point_sprites import shared_point_sprites
+    from zbuf_occlude.render.surfel_zbuffer import shared_surfel_zbuffer
     from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS
 
-    gpu = shared_point_sprites()
+    gpu = shared_surfel_zbuffer()
     masks_equal = point_views = ids_equal = covered = 0
     worst_depth = 0.0
     seconds: dict[str, list[float]] = {"cpu": [], "gpu": []}
