@@ -7,9 +7,9 @@ each (``zo.sample_surface``, seed 0), prepared once without normals (``zo.point_
 * **whole views**, interleaved pose by pose (the backends' order alternating): the median wall ms
   of ``visible`` on each backend, with the hull test (the default up to 20,000 points) and without;
 * **the GPU view's parts** under ``cProfile``, hull test off: the cumulative ms a view of the calls
-  that make it up (the camera frame, the image, the upload, the buffers' clearing and copies on
-  the GPU, the three stages' dispatches and barriers, the read-back, which waits for the GPU, the
-  unpacking, the CPU decision), and the rest.  A part a profiler cannot see (numba's compiled
+  that make it up (the camera frame, the image, the uploads, the buffers' clearing and copies on
+  the GPU, the passes' dispatches and barriers, the read-back of the mask, which waits for the
+  GPU), and the rest.  A part a profiler cannot see (numba's compiled
   functions on some Python versions) reads 0 and its time is in the rest.  cProfile adds its own cost to Python-heavy
   parts; the whole-view rows are timed without it.
 
@@ -40,14 +40,14 @@ PARTS = (
     ("frustum test", (("cameras.py", "in_frustum"),)),
     ("camera frame", (("point_kernels.py", "camera_frame"),)),
     ("image extent", (("splat_image.py", "splat_image"),)),
-    ("upload (the surfels)", (("moderngl/__init__.py", "write"),)),
+    ("uploads (surfels, points)", (("moderngl/__init__.py", "write"),)),
     ("clearing and copying buffers (GPU copies)", (("moderngl/__init__.py", "copy_buffer"),)),
-    ("dispatching the three stages", (("compute.py", "dispatch"),)),
+    ("dispatching the passes (stages, resolve, decision)", (("compute.py", "dispatch"),)),
     ("barriers", (("moderngl/__init__.py", "memory_barrier"),)),
-    ("read-back (waits for the GPU)", (("moderngl/__init__.py", "read"),)),
-    ("decision (CPU)", (("point_kernels.py", "decide"), ("point_kernels.py", "decide_threaded"))),
+    ("read-back (waits for the GPU)", (("moderngl/__init__.py", "read"), ("moderngl/__init__.py", "read_into"))),
+    ("decision on the CPU (a view of several tiles)", (("point_kernels.py", "decide"), ("point_kernels.py", "decide_threaded"))),
 )
-#: Own time of the function that runs a tile's passes and reads it back.
+#: Own time of the function that runs a tile's passes.
 UNPACK = ("surfel_zbuffer.py", "_fill_tile")
 
 

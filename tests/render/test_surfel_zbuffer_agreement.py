@@ -160,3 +160,64 @@ def test_the_agreement_benchmark_reports_equal_masks_and_buffers(sample_mesh_fil
 
     row = agreement(sample_mesh_files[:1], 256, [zo.camera_on_sphere(30.0, 45.0)], normals=False)
     assert (row["masks"], row["ids"], row["depth"], row["point_views"]) == (1.0, 1.0, 0.0, 256)
+
+
+def _count_cpu_decisions(monkeypatch) -> list[int]:
+    """Count the CPU kernel's decisions (:func:`point_kernels.decide` and its threaded twin)."""
+    calls = []
+    for name in ("decide", "decide_threaded"):
+        kernel = getattr(point_kernels, name)
+        monkeypatch.setattr(point_kernels, name, lambda *a, _k=kernel: calls.append(1) or _k(*a))
+    return calls
+
+
+@pytest.mark.parametrize("kind", ["estimated", "given", "oriented"])
+def test_the_gpu_decides_each_point_as_the_kernel_does(sample_mesh_files, monkeypatch, kind):
+    """The decision runs on the GPU (the CPU kernel is never called) and gives the kernel's mask,
+    for each kind of normals and at tolerances 0 and 1 (the splats alone, no hull test)."""
+    mesh = zo.load_mesh(next(p for p in sample_mesh_files if "chair" in p.name))
+    points, face_index = zo.sample_surface(mesh, 2048, seed=0)
+    normals = None if kind == "estimated" else mesh.face_normals[face_index]
+    surfels = zo.point_surfels(points, normals, oriented=kind == "oriented")
+    cameras = [zo.camera_on_sphere(el, az) for el, az in zo.view_schedule("fibonacci:6")]
+    expected = [[surfels.visible(c, tolerance=tol, hull_test=False) for tol in (0.0, 1.0)] for c in cameras]
+    calls = _count_cpu_decisions(monkeypatch)
+    got = [[surfels.visible(c, tolerance=tol, hull_test=False, backend="gpu") for tol in (0.0, 1.0)] for c in cameras]
+    assert not calls
+    assert all(np.array_equal(g, e) for gs, es in zip(got, expected) for g, e in zip(gs, es))
+    assert 0.2 < np.mean([e.mean() for es in expected for e in es]) < 0.8
+
+
+def test_a_view_of_several_tiles_is_decided_on_the_cpu(sample_mesh_files, monkeypatch):
+    """Where the image does not fit one storage buffer, the GPU fills it in tiles, reads it back,
+    and the CPU kernel decides: the same mask."""
+    surfels = zo.point_surfels(zo.sample_surface(zo.load_mesh(sample_mesh_files[0]), 1024, seed=0)[0])
+    camera = zo.camera_on_sphere(30.0, 45.0)
+    expected = surfels.visible(camera, hull_test=False)
+    calls = _count_cpu_decisions(monkeypatch)
+    monkeypatch.setattr(surfel_zbuffer.shared_surfel_zbuffer(), "max_tile_bytes", 8 * 512)
+    assert np.array_equal(surfels.visible(camera, hull_test=False, backend="gpu"), expected)
+    assert len(calls) == 1
+    with pytest.raises(ValueError, match="several tiles"):
+        surfel_zbuffer.shared_surfel_zbuffer().visible(
+            np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1), np.ones(1), np.zeros(1, bool), (0.01, 0.0, 0.0, 64, 64),
+            edge_on_cos=EDGE_ON_COS, rule=None,
+        )  # fmt: skip
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    n=st.integers(1, 300), seed=st.integers(0, 2**16), el=st.floats(-80.0, 80.0), az=st.floats(0.0, 360.0),
+    flat=st.booleans(), oriented=st.booleans(),
+)  # fmt: skip
+def test_masks_equal_on_random_clouds(n, seed, el, az, flat, oriented):
+    """Any cloud, any pose: a blob or a thin slab of random points, with or without oriented
+    normals (from the origin out), decided on the GPU as on the CPU."""
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(n, 3)) * ([1.0, 1.0, 0.05] if flat else 1.0)
+    normals = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-9) if oriented else None
+    if oriented:
+        normals[np.linalg.norm(normals, axis=1) == 0] = [0.0, 0.0, 1.0]
+    surfels = zo.point_surfels(points, normals, oriented=oriented)
+    camera = zo.camera_on_sphere(el, az, 6.0)
+    assert np.array_equal(surfels.visible(camera, backend="gpu"), surfels.visible(camera))

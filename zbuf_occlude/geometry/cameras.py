@@ -196,11 +196,24 @@ class Camera:
         return uv, depth
 
     def _camera_frame(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
-        pts = np.asarray(points, dtype=np.float64)
+        return np.stack(self._camera_columns(points), axis=1)
+
+    def _camera_columns(self, points: NDArray[np.floating]) -> tuple[NDArray[np.float64], ...]:
+        """The camera frame's x, y and z of ``points (N, 3)``, each ``(N,)`` float64:
+        ``((p_x R_a0 + p_y R_a1) + p_z R_a2) + t_a``, in that order, for every method's frustum
+        test.  Column sums rather than ``pts @ R.T``: a (N, 3) x (3, 3) product goes through
+        multithreaded BLAS, several times slower for this shape on a busy machine."""
+        p = np.asarray(points, dtype=np.float64).T
         rt = self.extrinsics
-        # Column sums rather than ``pts @ R.T``: a (N, 3) x (3, 3) product goes through
-        # multithreaded BLAS, which is several times slower for this shape on a busy machine.
-        return pts[:, 0:1] * rt[:, 0] + pts[:, 1:2] * rt[:, 1] + pts[:, 2:3] * rt[:, 2] + rt[:, 3]
+        term = np.empty(p.shape[1])
+        columns = []
+        for a in range(3):  # in place: fresh arrays of this size cost more than the arithmetic
+            column = p[0] * rt[a, 0]
+            column += np.multiply(p[1], rt[a, 1], out=term)
+            column += np.multiply(p[2], rt[a, 2], out=term)
+            column += rt[a, 3]
+            columns.append(column)
+        return tuple(columns)
 
     def in_frustum(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """(N,) bool: inside the view frustum (image bounds and znear ≤ depth ≤ zfar).
@@ -210,18 +223,12 @@ class Camera:
         :mod:`zbuf_occlude.visibility.cpu_zbuffer` and :mod:`zbuf_occlude.visibility.embree_fast`
         repeat to give the same answer to the last bit.
         """
-        cam = self._camera_frame(points)
-        depth = cam[:, 2]
+        x, y, depth = self._camera_columns(points)
+        focal = self.focal_px
         with np.errstate(divide="ignore", invalid="ignore"):
-            uv = cam[:, :2] / depth[:, None] * self.focal_px + np.array([self.width / 2.0, self.height / 2.0])
-        return (
-            (depth >= self.znear)
-            & (depth <= self.zfar)
-            & (uv[:, 0] >= 0)
-            & (uv[:, 0] < self.width)
-            & (uv[:, 1] >= 0)
-            & (uv[:, 1] < self.height)
-        )
+            u = x / depth * focal + self.width / 2.0
+            v = y / depth * focal + self.height / 2.0
+        return (depth >= self.znear) & (depth <= self.zfar) & (u >= 0) & (u < self.width) & (v >= 0) & (v < self.height)
 
     def pixel_size_at(self, depth: NDArray[np.floating]) -> NDArray[np.float64]:
         """Side of one pixel's footprint at linear ``depth``, object units."""

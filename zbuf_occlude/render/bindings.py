@@ -15,7 +15,7 @@ list starts.  There are no uniform blocks; plain uniforms are set by name
 from __future__ import annotations
 
 __all__ = [
-    "DEPTH_AND_FACE_UNIT", "DRAW_FACES", "EXACT_BIN_FACES", "EXACT_BITS", "EXACT_GLOBAL_FACES",
+    "DECIDE_POINTS", "DECIDE_VISIBLE", "DEPTH_AND_FACE_UNIT", "DRAW_FACES", "EXACT_BIN_FACES", "EXACT_BITS", "EXACT_GLOBAL_FACES",
     "EXACT_PARAMS", "EXACT_PLANES", "EXACT_POINTS", "EXACT_POINTS64", "EXACT_POINT_FACES",
     "EXACT_POINT_INDEX", "EXACT_TILE_COUNT", "EXACT_TILE_FACES", "EXACT_TILE_START", "EXACT_TRIANGLES",
     "GROUP_SIZE", "PROBE_PAIRS", "PROBE_PAIR_FACES", "PROBE_PLANES", "PROBE_RESULT", "SCAN_HITS", "SCAN_RAYS",
@@ -101,6 +101,11 @@ SPLAT_KEY_LOW = 2
 SPLAT_WINNER = 3
 #: Written by the resolve pass: float64 per pixel (as two uint words), the winner's depth, +inf where none.
 SPLAT_DEPTH = 4
+# point_decide.comp (reads SPLAT_SURFELS, SPLAT_WINNER and SPLAT_DEPTH too)
+#: Read: float64 per point, 2 each (spacing, sided as 0 or 1).
+DECIDE_POINTS = 5
+#: Written: uint per point, 1 visible.
+DECIDE_VISIBLE = 6
 
 #: ``(name, value)`` of every constant above, as :func:`~zbuf_occlude.render.shaders.load_shader`
 #: defines them in each shader.

@@ -46,6 +46,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Iterator
+from typing import NamedTuple
 
 import moderngl
 import numpy as np
@@ -56,7 +57,7 @@ from zbuf_occlude.render.compute import dispatch, set_uniforms
 from zbuf_occlude.render.context import shared_context
 from zbuf_occlude.render.shaders import load_shader
 
-__all__ = ["SLICES", "SurfelZBuffer", "shared_surfel_zbuffer", "tiles"]
+__all__ = ["SLICES", "DecisionRule", "SurfelZBuffer", "shared_surfel_zbuffer", "tiles"]
 
 #: Invocations per surfel: each tests every ``SLICES``-th row of the surfel's pixel box.
 SLICES = 8
@@ -102,6 +103,7 @@ class SurfelZBuffer:
         with self.ctx:
             self._shader = self.ctx.compute_shader(load_shader("point_splat.comp", _DEFINES))
             self._resolve = self.ctx.compute_shader(load_shader("point_splat.comp", (*_DEFINES, ("SPLAT_RESOLVE", 1))))
+            self._decide = self.ctx.compute_shader(load_shader("point_decide.comp"))
         self.max_tile_bytes = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 24))
         self._buffers: dict[str, moderngl.Buffer] = {}
         self._released = False
@@ -148,39 +150,114 @@ class SurfelZBuffer:
         ids : (height, width) int32
             Index of that surfel (the lowest of those at the same ``t``), −1 where none.
         """
-        if self._released:
-            raise RuntimeError("this SurfelZBuffer was released")
-        cam = np.asarray(cam, dtype=np.float64).reshape(-1, 3)
-        normal = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
-        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
-        n = len(cam)
+        n = self._upload(cam, normal, radius)
         depth = np.empty((height, width))
         ids = np.empty((height, width), dtype=np.int32)
         if n == 0 or width * height == 0:
             depth.fill(np.inf)
             ids.fill(-1)
             return depth, ids
-        surfels = np.concatenate([cam, normal, radius[:, None]], axis=1)
-        uniforms = {
-            "n_surfels": n, "size": (int(width), int(height)), "pix": float(pix), "x0": float(x0), "y0": float(y0),
-            "edge_on_cos2": float(edge_on_cos) * float(edge_on_cos), "box_margin": _BOX_MARGIN,
-        }  # fmt: skip
+        uniforms = _splat_uniforms(n, (pix, x0, y0, width, height), edge_on_cos)
         with self.ctx:
-            source = self._buffer("surfels", surfels.nbytes)
-            source.write(surfels.tobytes())
-            source.bind_to_storage_buffer(bindings.SPLAT_SURFELS, size=surfels.nbytes)
             for i0, j0, w, h in tiles(width, height, max(self.max_tile_bytes // 8, 1)):
+                words = self._fill_tile(n, (i0, j0), (w, h), uniforms)
                 if w == width:  # whole rows: read straight into the buffers
-                    self._fill_tile(n, (i0, j0), (w, h), uniforms, depth[j0 : j0 + h], ids[j0 : j0 + h])
+                    self._read_tile(words, depth[j0 : j0 + h], ids[j0 : j0 + h])
                 else:
                     tile_depth, tile_ids = np.empty((h, w)), np.empty((h, w), dtype=np.int32)
-                    self._fill_tile(n, (i0, j0), (w, h), uniforms, tile_depth, tile_ids)
+                    self._read_tile(words, tile_depth, tile_ids)
                     depth[j0 : j0 + h, i0 : i0 + w], ids[j0 : j0 + h, i0 : i0 + w] = tile_depth, tile_ids
         return depth, ids
 
-    def _fill_tile(self, n: int, offset: tuple[int, int], size: tuple[int, int], uniforms: dict, depth: NDArray, ids: NDArray) -> None:
+    def fits_one_tile(self, width: int, height: int) -> bool:
+        """Whether a ``width`` × ``height`` image is filled in one tile, as :meth:`visible` needs."""
+        return width * height <= self.max_tile_bytes // 8
+
+    def visible(
+        self,
+        cam: NDArray[np.floating],
+        normal: NDArray[np.floating],
+        radius: NDArray[np.floating],
+        spacing: NDArray[np.floating],
+        sided: NDArray[np.bool_],
+        image: tuple[float, float, float, int, int],
+        *,
+        edge_on_cos: float,
+        rule: DecisionRule,
+    ) -> NDArray[np.bool_]:
+        """Splat the surfels (:meth:`splat`) and decide each point on the GPU: the mask of
+        :func:`zbuf_occlude.visibility.point_kernels.decide` over :meth:`splat`'s buffers, bit
+        for bit, where the GL rounds float64 as IEEE 754 says (module docstring); only the mask
+        comes back.
+
+        Parameters
+        ----------
+        cam, normal, radius
+            As :meth:`splat`: the points as surfels, OpenCV camera frame.
+        spacing : (N,) float
+            Local sampling spacing of each point, object units.
+        sided : (N,) bool
+            The point lies on one side of a thin wall (``decide``'s ``sided``).
+        image : (pix, x0, y0, width, height)
+            The image, as :meth:`splat` takes it; :meth:`fits_one_tile` must hold for it.
+        edge_on_cos : float
+            As :meth:`splat`.
+        rule : DecisionRule
+            ``decide``'s settings and constants.
+
+        Returns
+        -------
+        visible : (N,) bool
+            As ``decide``'s: before the frustum test.
+
+        Raises
+        ------
+        ValueError
+            The image needs more than one tile.
+        """
+        pix, x0, y0, width, height = image
+        if not self.fits_one_tile(width, height):
+            raise ValueError(f"a {width} x {height} image is filled in several tiles: decide on the CPU")
+        n = self._upload(cam, normal, radius)
+        visible = np.zeros(n, dtype=np.uint32)
+        if n == 0 or width * height == 0:
+            return visible.astype(bool)
+        points = np.stack([np.asarray(spacing, dtype=np.float64).reshape(-1), np.asarray(sided, dtype=np.float64).reshape(-1)], axis=1)
+        uniforms = _splat_uniforms(n, image, edge_on_cos)
+        with self.ctx:
+            self._fill_tile(n, (0, 0), (width, height), uniforms)
+            source = self._buffer("points", points.nbytes)
+            source.write(points.tobytes())
+            source.bind_to_storage_buffer(bindings.DECIDE_POINTS, size=points.nbytes)
+            result = self._buffer("visible", visible.nbytes)
+            result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=visible.nbytes)
+            set_uniforms(self._decide, {**uniforms, "n_points": n, **rule.uniforms()})
+            dispatch(self._decide, n, "offset")
+            self.ctx.memory_barrier()
+            staging = self._buffer("staging", visible.nbytes)
+            self.ctx.copy_buffer(staging, result, visible.nbytes)
+            staging.read_into(visible, size=visible.nbytes)
+        return visible.astype(bool)
+
+    def _upload(self, cam, normal, radius) -> int:
+        """Write the surfels (7 float64 each) to the GPU and bind them; their number."""
+        if self._released:
+            raise RuntimeError("this SurfelZBuffer was released")
+        cam = np.asarray(cam, dtype=np.float64).reshape(-1, 3)
+        normal = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
+        if len(cam):
+            surfels = np.concatenate([cam, normal, radius[:, None]], axis=1)
+            with self.ctx:
+                source = self._buffer("surfels", surfels.nbytes)
+                source.write(surfels.tobytes())
+                source.bind_to_storage_buffer(bindings.SPLAT_SURFELS, size=surfels.nbytes)
+        return len(cam)
+
+    def _fill_tile(self, n: int, offset: tuple[int, int], size: tuple[int, int], uniforms: dict) -> int:
         """The three stages and the resolve pass over the ``size`` (columns, rows) tile whose
-        first pixel is ``offset``, read back into ``depth`` and ``ids`` (C-contiguous, its shape)."""
+        first pixel is ``offset``: the winners' ids and depths in their buffers, bound.  Returns
+        the bytes of a buffer of one uint a pixel."""
         pixels = size[0] * size[1]
         words = 4 * pixels  # bytes of a buffer of one uint a pixel
         blank = self._buffer("blank", words, fill=b"\xff")
@@ -201,9 +278,13 @@ class SurfelZBuffer:
         set_uniforms(self._resolve, tile)
         dispatch(self._resolve, pixels, "offset")
         self.ctx.memory_barrier()
+        return words
+
+    def _read_tile(self, words: int, depth: NDArray[np.float64], ids: NDArray[np.int32]) -> None:
+        """The tile just filled, read into ``depth`` and ``ids`` (C-contiguous, its shape)."""
         staging = self._buffer("staging", 3 * words)
-        self.ctx.copy_buffer(staging, resolved, 2 * words)
-        self.ctx.copy_buffer(staging, keys[2], words, write_offset=2 * words)
+        self.ctx.copy_buffer(staging, self._buffers["depth"], 2 * words)
+        self.ctx.copy_buffer(staging, self._buffers["winner"], words, write_offset=2 * words)
         staging.read_into(depth, size=2 * words)
         staging.read_into(ids, size=words, offset=2 * words)
 
@@ -230,12 +311,44 @@ class SurfelZBuffer:
             self._buffers.clear()
             self._shader.release()
             self._resolve.release()
+            self._decide.release()
 
     def __enter__(self) -> SurfelZBuffer:
         return self
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+class DecisionRule(NamedTuple):
+    """The settings and constants of :func:`zbuf_occlude.visibility.point_kernels.decide`, as
+    :meth:`SurfelZBuffer.visible` hands them to the GPU (the render layer cannot import them)."""
+
+    tolerance: float  #: distance to the tangent plane, spacings
+    crease_cos: float  #: normals closer than this (|cos|) are one smooth sheet
+    oriented: bool  #: the normals point out of the surface consistently (NORMALS_ORIENTED)
+    estimated: bool  #: the normals were estimated (NORMALS_ESTIMATED)
+    coplanar: float  #: point_kernels.COPLANAR
+    depth_slack: float  #: point_kernels.DEPTH_SLACK
+    curvature_slack: float  #: point_kernels.CURVATURE_SLACK
+    gap_reach: float  #: point_kernels.GAP_REACH
+
+    def uniforms(self) -> dict:
+        """The decision shader's uniforms."""
+        return {
+            "tolerance": float(self.tolerance), "crease_cos": float(self.crease_cos),
+            "oriented": int(bool(self.oriented)), "estimated": int(bool(self.estimated)),
+            "neg_coplanar": -float(self.coplanar), "depth_slack": float(self.depth_slack),
+            "half_slack": float(self.curvature_slack) * 0.5, "gap_reach": float(self.gap_reach),
+        }  # fmt: skip
+
+
+def _splat_uniforms(n: int, image: tuple, edge_on_cos: float) -> dict:
+    pix, x0, y0, width, height = image
+    return {
+        "n_surfels": n, "size": (int(width), int(height)), "pix": float(pix), "x0": float(x0), "y0": float(y0),
+        "edge_on_cos2": float(edge_on_cos) * float(edge_on_cos), "box_margin": _BOX_MARGIN,
+    }  # fmt: skip
 
 
 def tiles(width: int, height: int, max_pixels: int) -> Iterator[tuple[int, int, int, int]]:

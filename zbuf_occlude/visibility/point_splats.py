@@ -244,7 +244,7 @@ class PointSurfels:
 
         check_camera(camera)
         tol = check_nonnegative(tolerance, "tolerance")
-        splat_surfels = _splatter(backend)
+        zbuffer = _gpu_zbuffer(backend)
         n = len(self.points)
         hull = n <= HULL_VETO_MAX_POINTS if hull_test is None else check_flag(hull_test, "hull_test")
         check_memory(
@@ -261,14 +261,22 @@ class PointSurfels:
         cam, normal = kernels.camera_frame(points, normals, np.ascontiguousarray(extrinsics[:, :3]), extrinsics[:, 3].copy())
         image = splat_image(cam, radius, in_frustum[order], camera)
         box = (image.pix, image.x0, image.y0)
-        with kernels.threads_for(n) as threads:
-            if threads > 1 and splat_surfels is kernels.splat_surfels:
-                bands = kernels.BANDS_PER_THREAD * threads
-                depth, ids = kernels.splat_surfels_threaded(cam, normal, radius, *box, image.width, image.height, bands)
-            else:
-                depth, ids = splat_surfels(cam, normal, radius, *box, image.width, image.height)
-            decide = kernels.decide_threaded if threads > 1 else kernels.decide
-            decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self._normals, sided)
+        if zbuffer is not None and zbuffer.fits_one_tile(image.width, image.height):
+            rule = _decision_rule(tol, self._normals)
+            decided = zbuffer.visible(
+                cam, normal, radius, spacing, sided, (*box, image.width, image.height), edge_on_cos=kernels.EDGE_ON_COS, rule=rule
+            )
+        else:
+            with kernels.threads_for(n) as threads:
+                if zbuffer is not None:
+                    depth, ids = zbuffer.splat(cam, normal, radius, *box, image.width, image.height, edge_on_cos=kernels.EDGE_ON_COS)
+                elif threads > 1:
+                    bands = kernels.BANDS_PER_THREAD * threads
+                    depth, ids = kernels.splat_surfels_threaded(cam, normal, radius, *box, image.width, image.height, bands)
+                else:
+                    depth, ids = kernels.splat_surfels(cam, normal, radius, *box, image.width, image.height)
+                decide = kernels.decide_threaded if threads > 1 else kernels.decide
+                decided = decide(cam, normal, radius, spacing, depth, ids, box, tol, DEFAULT_CREASE_COS, self._normals, sided)
         visible = np.empty_like(decided)
         visible[order] = decided
         visible &= in_frustum
@@ -277,18 +285,26 @@ class PointSurfels:
         return visible
 
 
-def _splatter(backend: object):
-    """The rasteriser of ``backend`` (``"cpu"`` or ``"gpu"``), with the signature of
-    :func:`~zbuf_occlude.visibility.point_kernels.splat_surfels`."""
-    from zbuf_occlude.visibility import point_kernels
-
+def _gpu_zbuffer(backend: object):
+    """The GPU's surfel z-buffer for ``backend="gpu"``, None for ``"cpu"``."""
     if isinstance(backend, str) and backend == "cpu":
-        return point_kernels.splat_surfels
+        return None
     if isinstance(backend, str) and backend == "gpu":
         from zbuf_occlude.render.surfel_zbuffer import shared_surfel_zbuffer
 
-        return functools.partial(shared_surfel_zbuffer().splat, edge_on_cos=point_kernels.EDGE_ON_COS)
+        return shared_surfel_zbuffer()
     raise InvalidInputError(f"backend must be 'cpu' or 'gpu', got {backend!r}")
+
+
+def _decision_rule(tolerance: float, normals: int):
+    """:func:`~zbuf_occlude.visibility.point_kernels.decide`'s settings and constants, for the GPU."""
+    from zbuf_occlude.render.surfel_zbuffer import DecisionRule
+    from zbuf_occlude.visibility import point_kernels as kernels
+
+    return DecisionRule(
+        tolerance, DEFAULT_CREASE_COS, normals == kernels.NORMALS_ORIENTED, normals == kernels.NORMALS_ESTIMATED,
+        kernels.COPLANAR, kernels.DEPTH_SLACK, kernels.CURVATURE_SLACK, kernels.GAP_REACH,
+    )  # fmt: skip
 
 
 def _check_coordinates(points: NDArray[np.float64]) -> None:

@@ -48,20 +48,22 @@ def splat_image(cam: NDArray[np.float64], radius: NDArray[np.float64], in_frustu
         ``camera.in_frustum`` of the points; at least one True.
     camera : Camera
     """
-    z = cam[in_frustum, 2]
-    r = radius[in_frustum]
-    xy = cam[in_frustum, :2] / z[:, None]
+    inside = cam[in_frustum] if not in_frustum.all() else cam  # one gather, not one per column
+    z = inside[:, 2]
+    r = radius[in_frustum] if inside is not cam else radius
+    x, y = inside[:, 0] / z, inside[:, 1] / z
     # a splat reaching the camera plane would cover everything: its angular size is capped
     rho = r / np.maximum(z - r, 0.5 * z)
     half_h = math.tan(math.radians(camera.yfov_deg) / 2.0)
     half_w = half_h * camera.width / camera.height
+    x_lo, x_hi, y_lo, y_hi = float(x.min()), float(x.max()), float(y.min()), float(y.max())
     # a disk off the axis projects wider than rho, by up to a factor 1 + |x/z| (the kernel's box);
     # past _MAX_PAD frustums the pad only makes the numbers overflow (a splat at the camera plane)
-    pad = min(float(rho.max()) * (1.0 + float(np.abs(xy).max())), _MAX_PAD * max(half_w, half_h))
-    x0 = max(float(xy[:, 0].min()), -half_w) - pad
-    x1 = min(float(xy[:, 0].max()), half_w) + pad
-    y0 = max(float(xy[:, 1].min()), -half_h) - pad
-    y1 = min(float(xy[:, 1].max()), half_h) + pad
+    pad = min(float(rho.max()) * (1.0 + max(-x_lo, x_hi, -y_lo, y_hi)), _MAX_PAD * max(half_w, half_h))
+    x0 = max(x_lo, -half_w) - pad
+    x1 = min(x_hi, half_w) + pad
+    y0 = max(y_lo, -half_h) - pad
+    y1 = min(y_hi, half_h) + pad
     extent_x, extent_y = max(x1 - x0, 1e-12), max(y1 - y0, 1e-12)
     positive = rho[rho > 0]
     pix = float(np.median(positive)) / SPLAT_PIXELS_PER_RADIUS if len(positive) else max(extent_x, extent_y)

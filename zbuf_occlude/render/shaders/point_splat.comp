@@ -49,30 +49,7 @@ uvec2 key64(double t) {
     return (bits.y >> 31) != 0u ? ~bits : uvec2(bits.x, bits.y | 0x80000000u);
 }
 
-// The halves of a that hold 26 and 27 bits of its mantissa: their products are exact (Veltkamp).
-dvec2 split(double a) {
-    precise double c = 134217729.0 * a;  // 2^27 + 1
-    precise double high = c - (c - a);
-    precise double low = a - high;
-    return dvec2(high, low);
-}
-
-// nq - t0 den, exactly where t0 is nq / den to a few ulps (Dekker 1971: p + e = t0 den exactly,
-// and nq - p is exact, Sterbenz).
-double residual(double nq, double t0, double den) {
-    dvec2 a = split(t0), b = split(den);
-    precise double p = t0 * den;
-    precise double e = ((a.x * b.x - p) + a.x * b.y + a.y * b.x) + a.y * b.y;
-    precise double r = (nq - p) - e;
-    return r;
-}
-
-// floor(v) as an int, v clamped to [-1, n] first (NaN: -1): point_kernels._cell.
-int cell(double v, int n) {
-    if (!(v >= -1.0)) return -1;
-    if (v >= double(n)) return n;
-    return int(floor(v));
-}
+//#include splat64.glsl
 
 #ifdef SPLAT_RESOLVE
 void main() {
