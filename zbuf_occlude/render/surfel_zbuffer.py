@@ -106,6 +106,7 @@ class SurfelZBuffer:
             self._decide = self.ctx.compute_shader(load_shader("point_decide.comp"))
         self.max_tile_bytes = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 24))
         self._buffers: dict[str, moderngl.Buffer] = {}
+        self._host = np.empty((0, 7))  # the surfels as uploaded, (N, 7) float64
         self._released = False
 
     def splat(
@@ -227,7 +228,7 @@ class SurfelZBuffer:
         with self.ctx:
             self._fill_tile(n, (0, 0), (width, height), uniforms)
             source = self._buffer("points", points.nbytes)
-            source.write(points.tobytes())
+            source.write(points)
             source.bind_to_storage_buffer(bindings.DECIDE_POINTS, size=points.nbytes)
             result = self._buffer("visible", visible.nbytes)
             result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=visible.nbytes)
@@ -245,12 +246,14 @@ class SurfelZBuffer:
             raise RuntimeError("this SurfelZBuffer was released")
         cam = np.asarray(cam, dtype=np.float64).reshape(-1, 3)
         normal = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
-        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
+        radius = np.asarray(radius, dtype=np.float64).reshape(-1, 1)
+        if len(self._host) < len(cam):  # kept: fresh arrays of this size cost more than the copy
+            self._host = np.empty((len(cam), 7))
+        surfels = np.concatenate([cam, normal, radius], axis=1, out=self._host[: len(cam)])
         if len(cam):
-            surfels = np.concatenate([cam, normal, radius[:, None]], axis=1)
             with self.ctx:
                 source = self._buffer("surfels", surfels.nbytes)
-                source.write(surfels.tobytes())
+                source.write(surfels)
                 source.bind_to_storage_buffer(bindings.SPLAT_SURFELS, size=surfels.nbytes)
         return len(cam)
 
