@@ -4,8 +4,10 @@ per-point decision (:mod:`zbuf_occlude.visibility.point_splats` states the metho
 Both work in the OpenCV camera frame (x right, y down, z = linear depth forward, object units) on
 an image plane at z = 1: pixel ``(i, j)`` is the square ``[x0 + i·pix, x0 + (i+1)·pix) ×
 [y0 + j·pix, y0 + (j+1)·pix)`` of normalised coordinates ``(x/z, y/z)``, sampled at its centre.
-The GPU path (:mod:`zbuf_occlude.render.surfel_zbuffer`) fills the same buffers with the same
-formulas in float64; :func:`decide` then runs on either.
+The GPU path (:mod:`zbuf_occlude.render.surfel_zbuffer`) fills the same buffers and decides with
+the same formulas in float64, operation by operation (``render/shaders/point_splat.comp`` and
+``point_decide.comp``): a change to :func:`splat_surfels` or :func:`decide` is a change to them too
+(tests/render/test_surfel_zbuffer_agreement.py fails until both agree).
 """
 
 from __future__ import annotations

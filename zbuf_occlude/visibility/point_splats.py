@@ -213,11 +213,12 @@ class PointSurfels:
             Distance from a point's tangent plane, in spacings, within which the surface that
             wins its pixel counts as its own (:data:`~zbuf_occlude.defaults.DEFAULT_SPLAT_TOLERANCE`).
         backend : {"cpu", "gpu"}
-            Who rasterises the splats: ``"cpu"`` (numba, float64) or ``"gpu"`` (an OpenGL compute
-            shader, float64, :mod:`zbuf_occlude.render.surfel_zbuffer`); the decision runs on
-            the CPU either way.  Both break ties the same way (least depth, then lowest id): the
-            masks are equal on 100 % of point-views of the shipped meshes (8 meshes x 16 poses at
-            2,048 and 10,000 points, Mesa llvmpipe and an NVIDIA H200).  From
+            Who splats and decides: ``"cpu"`` (numba, float64) or ``"gpu"`` (OpenGL compute
+            shaders, float64, :mod:`zbuf_occlude.render.surfel_zbuffer`; the CPU decides where
+            the image needs several of its tiles).  Both compute the same arithmetic and break
+            ties the same way (least depth, then lowest id): the masks are equal on 100 % of
+            point-views of the shipped meshes (8 meshes x 16 poses at 2,048 to 100,000 points,
+            Mesa llvmpipe and an NVIDIA H200).  From
             :data:`~zbuf_occlude.visibility.point_kernels.THREADED_MIN_POINTS` points the CPU
             kernels run on numba's threads where allowed
             (:func:`~zbuf_occlude.visibility.point_kernels.threads_for`), with the same masks.
