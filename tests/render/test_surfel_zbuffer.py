@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 import zbuf_occlude as zo
 from zbuf_occlude.errors import BackendUnavailable, InvalidInputError
 from zbuf_occlude.render import surfel_zbuffer
-from zbuf_occlude.render.surfel_zbuffer import SLICES, SurfelZBuffer, shared_surfel_zbuffer, tiles
+from zbuf_occlude.render.surfel_zbuffer import SLICES, DecisionRule, SurfelZBuffer, shared_surfel_zbuffer, tiles
+from zbuf_occlude.visibility import point_kernels
 from zbuf_occlude.visibility.point_kernels import EDGE_ON_COS, splat_surfels
 from zbuf_occlude.visibility.splat_image import splat_image
 
@@ -135,8 +136,12 @@ def test_release_frees_every_gl_object():
     zbuffer = SurfelZBuffer()
     cam, normal, radius = np.array([[0.0, 0.0, 2.0]]), np.array([[0.0, 0.0, 1.0]]), np.array([0.1])
     zbuffer.splat(cam, normal, radius, 0.01, -0.1, -0.1, 20, 20, edge_on_cos=EDGE_ON_COS)
-    objects = [zbuffer._shader, zbuffer._resolve, *zbuffer._buffers.values()]
-    assert len(objects) == 2 + 7  # the surfels, a blank, three keys, the depth, the staging buffer
+    rule = DecisionRule(0.25, 0.9, False, True, point_kernels.COPLANAR, point_kernels.DEPTH_SLACK, point_kernels.CURVATURE_SLACK, 2.0)
+    assert zbuffer.visible(
+        cam, normal, radius, np.ones(1), np.zeros(1, bool), (0.01, -0.1, -0.1, 20, 20), edge_on_cos=EDGE_ON_COS, rule=rule
+    ).all()
+    objects = [zbuffer._shader, zbuffer._resolve, zbuffer._decide, *zbuffer._buffers.values()]
+    assert len(objects) == 3 + 9  # the surfels and points, a blank, three keys, the depth, the mask, the staging buffer
     zbuffer.release()
     zbuffer.release()  # twice is fine
     assert all(type(obj.mglo).__name__ == "InvalidObject" for obj in objects)
