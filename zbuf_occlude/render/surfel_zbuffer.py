@@ -346,7 +346,7 @@ class DecisionRule(NamedTuple):
         return {
             "tolerance": float(self.tolerance), "crease_cos": float(self.crease_cos),
             "oriented": int(bool(self.oriented)), "estimated": int(bool(self.estimated)),
-            "neg_coplanar": -float(self.coplanar), "depth_slack": float(self.depth_slack),
+            "coplanar": float(self.coplanar), "depth_slack": float(self.depth_slack),
             "half_slack": float(self.curvature_slack) * 0.5, "gap_reach": float(self.gap_reach),
         }  # fmt: skip
 

@@ -269,8 +269,8 @@ def decide(cam, normal, radius, spacing, depth, ids, box, tolerance, crease_cos,
     """Per point: does the surfel that wins its pixel lie on the point's own surface?
 
     Point ``p`` is a candidate when nothing covers its pixel, when its own surfel wins, when the
-    winner ``q``'s centre lies behind ``p``'s tangent plane as seen from the camera (its disk
-    only cuts that plane, as past a convex crease), or when the winner's surface point ``h``
+    winner ``q``'s centre lies behind ``p``'s tangent plane as seen from the camera, or in it to
+    :data:`COPLANAR` spacings (its disk only cuts that plane, as past a convex crease), or when the winner's surface point ``h``
     (where the pixel's ray meets its disk) lies within ``tolerance · spacing[p]`` of ``p``'s
     tangent plane, widened by :func:`_curvature_allowance`, or less than :data:`DEPTH_SLACK`
     spacings in front of ``p`` along the camera's axis (with estimated normals, ``h`` or ``q``'s
@@ -337,13 +337,13 @@ def _decide_point(
         if q_faces and not p_faces:
             return False
     dx, dy, dz = px - cam[q, 0], py - cam[q, 1], pz - cam[q, 2]
-    # the winner's centre behind p's tangent plane (seen from the camera): its disk only
-    # passes through that plane, as past a convex crease, and hides nothing of p's sheet
+    # the winner's centre behind p's tangent plane (seen from the camera), or in it: its disk
+    # only passes through that plane, as past a convex crease, and hides nothing of p's sheet
+    # (in it: within COPLANAR spacings, as coplanar surfels that tie for the pixel, and a centre
+    # on a convex crease, which rounding puts on either side)
     toward = -(normal[p, 0] * px + normal[p, 1] * py + normal[p, 2] * pz)  # n_p · (eye - p)
     rise = -(dx * normal[p, 0] + dy * normal[p, 1] + dz * normal[p, 2])  # n_p · (q - p)
-    # (a winner in p's plane, as among coplanar surfels that tie for the pixel, is decided
-    # by the distance below, whichever of them won)
-    if rise * toward < -COPLANAR * spacing[p] * abs(toward):
+    if rise * toward < COPLANAR * spacing[p] * abs(toward):
         return not _in_a_gap(p, i, j, cam, normal, radius, spacing, depth, ids, pix, x0, y0, tolerance, crease_cos, oriented)
     x = x0 + (i + 0.5) * pix
     y = y0 + (j + 0.5) * pix

@@ -16,7 +16,7 @@ uniform double tolerance;      // spacings
 uniform double crease_cos;
 uniform int oriented;          // normals == NORMALS_ORIENTED
 uniform int estimated;         // normals == NORMALS_ESTIMATED
-uniform double neg_coplanar;   // -point_kernels.COPLANAR
+uniform double coplanar;       // point_kernels.COPLANAR
 uniform double depth_slack;    // point_kernels.DEPTH_SLACK
 uniform double half_slack;     // point_kernels.CURVATURE_SLACK * 0.5
 uniform double gap_reach;      // point_kernels.GAP_REACH
@@ -111,9 +111,9 @@ bool decide_point(int p) {
     precise double dx = c.x - cq.x, dy = c.y - cq.y, dz = c.z - cq.z;
     precise double toward = -(n.x * c.x + n.y * c.y + n.z * c.z);
     precise double rise = -(dx * n.x + dy * n.y + dz * n.z);
-    precise double coplanar = neg_coplanar * spacing * abs(toward);
+    precise double in_plane = coplanar * spacing * abs(toward);
     precise double rise_toward = rise * toward;
-    if (rise_toward < coplanar) return !in_a_gap(p, i, j, spacing);
+    if (rise_toward < in_plane) return !in_a_gap(p, i, j, spacing);
     precise double x = x0 + (double(i) + 0.5) * pix;
     precise double y = y0 + (double(j) + 0.5) * pix;
     double t = packDouble2x32(depth_bits[j * size.x + i]);
