@@ -27,9 +27,12 @@ eyes = arrays(np.float64, 3, elements=st.floats(-30.0, 30.0, allow_nan=False, al
 @settings(max_examples=60, deadline=None)
 @given(clouds, eyes, st.floats(1.0, 1e4))
 @example(np.full((1, 3), 7.47e-160), np.zeros(3), 1.0)  # squares below the smallest normal float64
+@example(np.array([[5e-324, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.full(3, 5e-324), 1.0)  # subnormal offsets from the eye
 def test_law_a_flipped_point_stays_on_its_ray_at_twice_the_radius_less_its_distance(points, eye, factor):
     image = flipped(points, eye, factor)
     p = points - eye
+    largest = np.abs(p).max(initial=0.0)
+    p = p / largest if largest > 0.0 else p  # subnormal differences: their distances would round to one ulp
     d = np.hypot(np.hypot(p[:, 0], p[:, 1]), p[:, 2])  # no square to underflow at 1e-160
     unit = d.max(initial=0.0)  # the farthest point's distance: the images' unit of length
     away = d > 1e-9 * unit
