@@ -58,7 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zbuf_occlude.render import bindings
-from zbuf_occlude.render.compute import dispatch, set_uniforms
+from zbuf_occlude.render.compute import dispatch, read_through, set_uniforms
 from zbuf_occlude.render.context import shared_context
 from zbuf_occlude.render.shaders import load_shader
 
@@ -68,7 +68,7 @@ __all__ = ["SLICES", "DecisionRule", "SurfelZBuffer", "shared_surfel_zbuffer", "
 SLICES = 8
 #: The shader's stages (module docstring).
 _DEFINES = (("SPLAT_STAGE_HIGH", 0), ("SPLAT_STAGE_LOW", 1), ("SPLAT_STAGE_ID", 2), ("SPLAT_SLICES", SLICES))
-_STAGES = (0, 1, 2)
+_STAGES = tuple(value for name, value in _DEFINES if name.startswith("SPLAT_STAGE_"))
 #: Share of a disk's radius added to each side of its box: far above the rounding of a unit normal
 #: and of the disk test (~1e-16), far below a pixel; the kernel's
 #: :data:`~zbuf_occlude.visibility.point_kernels.BOX_MARGIN` (the render layer cannot import it;
@@ -165,7 +165,7 @@ class SurfelZBuffer:
             return depth, ids
         uniforms = _splat_uniforms(n, (pix, x0, y0, width, height), edge_on_cos)
         with self.ctx:
-            for i0, j0, w, h in tiles(width, height, max(self.max_tile_bytes // 8, 1)):
+            for i0, j0, w, h in tiles(width, height, self._tile_pixels):
                 words = self._fill_tile(n, (i0, j0), (w, h), uniforms)
                 if w == width:  # whole rows: read straight into the buffers
                     self._read_tile(words, depth[j0 : j0 + h], ids[j0 : j0 + h])
@@ -177,7 +177,12 @@ class SurfelZBuffer:
 
     def fits_one_tile(self, width: int, height: int) -> bool:
         """Whether a ``width`` × ``height`` image is filled in one tile, as :meth:`visible` needs."""
-        return width * height <= self.max_tile_bytes // 8
+        return width * height <= self._tile_pixels
+
+    @property
+    def _tile_pixels(self) -> int:
+        """Pixels of the largest tile: its depth buffer (8 bytes a pixel) fits :attr:`max_tile_bytes`."""
+        return max(self.max_tile_bytes // 8, 1)
 
     def visible(
         self,
@@ -225,9 +230,8 @@ class SurfelZBuffer:
         if not self.fits_one_tile(width, height):
             raise ValueError(f"a {width} x {height} image is filled in several tiles: decide on the CPU")
         n = self._upload(cam, normal, radius)
-        visible = np.zeros(n, dtype=np.uint32)
         if n == 0 or width * height == 0:
-            return visible.astype(bool)
+            return np.zeros(n, dtype=np.bool_)
         points = np.stack([np.asarray(spacing, dtype=np.float64).reshape(-1), np.asarray(sided, dtype=np.float64).reshape(-1)], axis=1)
         uniforms = _splat_uniforms(n, image, edge_on_cos)
         with self.ctx:
@@ -235,15 +239,13 @@ class SurfelZBuffer:
             source = self._buffer("points", points.nbytes)
             source.write(points)
             source.bind_to_storage_buffer(bindings.DECIDE_POINTS, size=points.nbytes)
-            result = self._buffer("visible", visible.nbytes)
-            result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=visible.nbytes)
+            result = self._buffer("visible", 4 * n)
+            result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=4 * n)
             set_uniforms(self._decide, {**uniforms, "n_points": n, **rule.uniforms()})
             dispatch(self._decide, n, "offset")
             self.ctx.memory_barrier()
-            staging = self._buffer("staging", visible.nbytes)
-            self.ctx.copy_buffer(staging, result, visible.nbytes)
-            staging.read_into(visible, size=visible.nbytes)
-        return visible.astype(bool)
+            words = read_through(self.ctx, result, self._buffer("staging", 4 * n), 4 * n)
+        return np.frombuffer(words, dtype=np.uint32) != 0
 
     def _upload(self, cam, normal, radius) -> int:
         """Write the surfels (7 float64 each) to the GPU and bind them; their number."""
