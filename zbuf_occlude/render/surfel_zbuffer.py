@@ -239,12 +239,13 @@ class SurfelZBuffer:
             source = self._buffer("points", points.nbytes)
             source.write(points)
             source.bind_to_storage_buffer(bindings.DECIDE_POINTS, size=points.nbytes)
-            result = self._buffer("visible", 4 * n)
-            result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=4 * n)
+            size = n * np.dtype(np.uint32).itemsize  # one word a point
+            result = self._buffer("visible", size)
+            result.bind_to_storage_buffer(bindings.DECIDE_VISIBLE, size=size)
             set_uniforms(self._decide, {**uniforms, "n_points": n, **rule.uniforms()})
             dispatch(self._decide, n, "offset")
             self.ctx.memory_barrier()
-            words = read_through(self.ctx, result, self._buffer("staging", 4 * n), 4 * n)
+            words = read_through(self.ctx, result, self._buffer("staging", size), size)
         return np.frombuffer(words, dtype=np.uint32) != 0
 
     def _upload(self, cam, normal, radius) -> int:
